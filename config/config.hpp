@@ -1,0 +1,20 @@
+#pragma once
+// The whole contourd configuration: one YAML file, validated on load (unknown keys, wrong types
+// and out-of-range values are errors naming file:line:column and the key path).
+#include <string>
+
+#include "config/machine_config.hpp"
+#include "config/yaml_reader.hpp"
+
+namespace contour::config {
+
+struct Config {
+  std::string source;  // file name (or "<string>")
+  MachineConfig machine;
+};
+
+// Throws ConfigError with every problem found.
+Config load_config_file(const std::string& path);
+Config load_config_string(const std::string& text, const std::string& name = "<string>");
+
+}  // namespace contour::config

@@ -1,0 +1,38 @@
+#include "config/machine_config.hpp"
+
+namespace contour::config {
+
+MachineConfig parse_machine(Section& s) {
+  MachineConfig m;
+  m.period_s = s.number("period_ms", 1.0, 0.125, 20.0) / 1000.0;
+  auto axes = s.list("axes");
+  if (axes.empty() || axes.size() > 3) s.error("axes", "expected a list of 1 to 3 axes");
+  const char* default_names[] = {"X", "Y", "Z"};
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    Section& a = axes[i];
+    AxisConfig ax;
+    ax.name = a.choice("name", i < 3 ? default_names[i] : "X", {"X", "Y", "Z"});
+    ax.node_id = static_cast<int>(a.integer("node_id", 0, 0, 127));
+    ax.counts_per_mm = a.number("counts_per_mm", 2000.0, 1e-3, 1e9);
+    ax.min_mm = a.number("min_mm", -1000.0, -1e6, 1e6);
+    ax.max_mm = a.number("max_mm", 1000.0, -1e6, 1e6);
+    if (ax.max_mm <= ax.min_mm) a.error("max_mm", "must be greater than min_mm");
+    ax.max_velocity_mm_min = a.number("max_velocity_mm_min", 10000.0, 1.0, 1e6);
+    ax.max_accel_mm_s2 = a.number("max_accel_mm_s2", 2000.0, 1.0, 1e6);
+    Section d = a.child("sim");
+    ax.drive.gain_per_s = d.number("gain_per_s", i == 2 ? 115.0 : 120.0, 1e-3, 1e5);
+    ax.drive.tau_s = d.number("tau_ms", i == 2 ? 25.0 : 30.0, 0.0, 10000.0) / 1000.0;
+    ax.drive.blu_mm = d.number("blu_um", 0.5, 0.0, 1000.0) / 1000.0;
+    ax.drive.delay_cycles =
+        static_cast<int>(d.integer("delay_cycles", 1, 0, control::FeedDrive::kMaxDelay));
+    ax.drive.period_s = m.period_s;
+    d.finish();
+    for (const auto& other : m.axes) {
+      if (other.name == ax.name) a.error("name", "axis " + ax.name + " is defined twice");
+    }
+    m.axes.push_back(ax);
+  }
+  return m;
+}
+
+}  // namespace contour::config

@@ -1,0 +1,58 @@
+#include "config/config.hpp"
+
+#include <gtest/gtest.h>
+
+using contour::config::ConfigError;
+using contour::config::load_config_string;
+
+namespace {
+std::vector<std::string> errors_of(const std::string& yaml) {
+  try {
+    load_config_string(yaml, "test.yaml");
+  } catch (const ConfigError& e) {
+    return e.errors();
+  }
+  return {};
+}
+bool any_contains(const std::vector<std::string>& v, const std::string& s) {
+  for (const auto& e : v) {
+    if (e.find(s) != std::string::npos) return true;
+  }
+  return false;
+}
+}  // namespace
+
+TEST(Config, LoadsAxesWithDefaults) {
+  auto cfg = load_config_string("machine:\n  axes:\n    - {name: X}\n    - {name: Y}\n    - {name: Z}\n");
+  ASSERT_EQ(cfg.machine.axes.size(), 3u);
+  EXPECT_DOUBLE_EQ(cfg.machine.axes[0].drive.gain_per_s, 120.0);
+  EXPECT_DOUBLE_EQ(cfg.machine.axes[2].drive.tau_s, 0.025);
+}
+
+TEST(Config, UnknownKeyIsAnErrorWithLineAndPath) {
+  auto errs = errors_of("machine:\n  axes:\n    - name: X\n      gian: 3\n");
+  ASSERT_EQ(errs.size(), 1u);
+  EXPECT_TRUE(any_contains(errs, "test.yaml:4:7: machine.axes[0].gian: unknown key")) << errs[0];
+}
+
+TEST(Config, AllErrorsReportedAtOnce) {
+  auto errs = errors_of(
+      "machine:\n  axes:\n    - name: X\n      counts_per_mm: -4\n      sim: {tau_ms: abc}\n"
+      "bogus: 1\n");
+  EXPECT_EQ(errs.size(), 3u);
+  EXPECT_TRUE(any_contains(errs, "machine.axes[0].counts_per_mm: value -4 out of range"));
+  EXPECT_TRUE(any_contains(errs, "machine.axes[0].sim.tau_ms: expected a number, got 'abc'"));
+  EXPECT_TRUE(any_contains(errs, ":6:1: bogus: unknown key"));
+}
+
+TEST(Config, SyntaxErrorNamesLine) {
+  auto errs = errors_of("machine:\n  axes: [\n");
+  ASSERT_EQ(errs.size(), 1u);
+  EXPECT_TRUE(any_contains(errs, "test.yaml:3")) << errs[0];
+  EXPECT_TRUE(any_contains(errs, "YAML syntax error"));
+}
+
+TEST(Config, DuplicateAxisRejected) {
+  auto errs = errors_of("machine:\n  axes:\n    - name: X\n    - name: X\n");
+  EXPECT_TRUE(any_contains(errs, "axis X is defined twice"));
+}

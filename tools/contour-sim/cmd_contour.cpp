@@ -1,0 +1,12 @@
+// Placeholder until the contour simulation lands: says so and fails, never pretends.
+#include <cstdio>
+
+#include "tools/contour-sim/commands.hpp"
+
+namespace contour::sim {
+int run_contour(int /*argc*/, char** /*argv*/) {
+  std::fputs("contour-sim contour: not implemented yet\n", stderr);
+  std::puts("{\"error\": \"not implemented\"}");
+  return 2;
+}
+}  // namespace contour::sim

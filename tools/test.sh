@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Builds contourd and runs every test: unit, sim and HIL (HIL under tools/with-vcan, through
+# User-Mode Linux where the host kernel has no vcan). Installs what it needs first.
+#   tools/test.sh [--preset release|ci|dev] [--no-hil] [--with-slow] [--dev-unit]
+# --dev-unit also builds the ASan+UBSan preset and runs the unit tests there.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+preset=release
+hil=1
+slow=0
+dev_unit=0
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --preset) preset=$2; shift 2 ;;
+    --no-hil) hil=0; shift ;;
+    --with-slow) slow=1; shift ;;
+    --dev-unit) dev_unit=1; shift ;;
+    *) echo "test.sh: unknown option $1" >&2; exit 2 ;;
+  esac
+done
+
+tools/deps.sh
+start=$(date +%s)
+tools/build.sh "$preset"
+echo "test.sh: build ($preset) took $(( $(date +%s) - start )) s"
+
+status=0
+exclude="hil"
+[ "$slow" = 1 ] || exclude="hil|slow"
+echo "== unit + sim tests ($preset) =="
+ctest --test-dir "build/$preset" -LE "$exclude" --output-on-failure -j "$(nproc)" || status=1
+
+if [ "$hil" = 1 ]; then
+  echo "== HIL tests ($preset) under tools/with-vcan =="
+  hil_label="hil"
+  tools/with-vcan --ifaces vcan0,vcan1 -- \
+    ctest --test-dir "build/$preset" -L "$hil_label" -LE "$([ "$slow" = 1 ] && echo '^$' || echo slow)" \
+    --output-on-failure || status=1
+fi
+
+if [ "$dev_unit" = 1 ]; then
+  echo "== unit tests, ASan + UBSan (dev preset) =="
+  tools/build.sh dev
+  ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+    ctest --test-dir build/dev -L unit --output-on-failure -j "$(nproc)" || status=1
+fi
+
+echo "test.sh: total $(( $(date +%s) - start )) s, status $status"
+exit $status
