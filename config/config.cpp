@@ -12,6 +12,38 @@ Config parse_root(const YAML::Node& root, const std::string& name) {
     if (!top.present()) diag.error(root, "", "empty configuration");
     Section machine = top.child("machine");
     cfg.machine = parse_machine(machine);
+    {
+      Section sec = top.child("interpolator");
+      cfg.interpolator = parse_interpolator(sec);
+    }
+    {
+      Section sec = top.child("program");
+      cfg.program = parse_program(sec);
+    }
+    {
+      Section sec = top.child("control");
+      cfg.control = parse_control(sec);
+    }
+    {
+      Section sec = top.child("force");
+      cfg.force = parse_force(sec);
+    }
+    {
+      Section sec = top.child("bus");
+      cfg.bus = parse_bus(sec);
+    }
+    {
+      Section sec = top.child("dynamometer");
+      cfg.dynamometer = parse_dynamometer(sec);
+    }
+    {
+      Section sec = top.child("spindle");
+      cfg.spindle = parse_spindle(sec);
+    }
+    {
+      Section sec = top.child("gpio");
+      cfg.gpio = parse_gpio(sec);
+    }
   }
   diag.throw_if_any();
   return cfg;

@@ -3,7 +3,15 @@
 // and out-of-range values are errors naming file:line:column and the key path).
 #include <string>
 
+#include "config/bus_config.hpp"
+#include "config/control_config.hpp"
+#include "config/dynamometer_config.hpp"
+#include "config/force_config.hpp"
+#include "config/gpio_config.hpp"
+#include "config/interpolator_config.hpp"
 #include "config/machine_config.hpp"
+#include "config/program_config.hpp"
+#include "config/spindle_config.hpp"
 #include "config/yaml_reader.hpp"
 
 namespace contour::config {
@@ -11,6 +19,14 @@ namespace contour::config {
 struct Config {
   std::string source;  // file name (or "<string>")
   MachineConfig machine;
+  InterpolatorConfig interpolator;
+  ProgramConfig program;
+  ControlConfig control;
+  ForceConfig force;
+  BusConfig bus;
+  DynamometerConfig dynamometer;
+  SpindleConfig spindle;
+  GpioConfig gpio;
 };
 
 // Throws ConfigError with every problem found.
