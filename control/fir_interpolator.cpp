@@ -1,0 +1,239 @@
+#include "control/fir_interpolator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace contour::control {
+
+void FirFilter::configure(int taps1, int taps2) {
+  if (taps1 < 1 || taps2 < 0) throw std::invalid_argument("FIR taps must be >= 1");
+  std::vector<double> a(static_cast<std::size_t>(taps1), 1.0 / taps1);
+  if (taps2 > 0) {
+    std::vector<double> c(static_cast<std::size_t>(taps1 + taps2 - 1), 0.0);
+    for (int i = 0; i < taps1; ++i)
+      for (int j = 0; j < taps2; ++j) c[static_cast<std::size_t>(i + j)] += a[static_cast<std::size_t>(i)] / taps2;
+    a = std::move(c);
+  }
+  w_ = std::move(a);
+  length_ = static_cast<int>(w_.size());
+  p_.assign(w_.size() + 1, 0.0);
+  pi_.assign(w_.size() + 1, 0.0);
+  for (std::size_t i = 0; i < w_.size(); ++i) {
+    p_[i + 1] = p_[i] + w_[i];
+    pi_[i + 1] = pi_[i] + static_cast<double>(i) * w_[i];
+  }
+  // Make the total exactly 1 so a finished block lands exactly on its end point.
+  p_.back() = 1.0;
+}
+
+double FirFilter::progress(std::int64_t k, std::int64_t n) const noexcept {
+  if (k <= 0) return 0.0;
+  const std::int64_t last = length_ - 1;
+  if (k - last >= n) return static_cast<double>(n);
+  // Taps i <= k-n see the whole block (n), taps k-n < i < k see k-i samples, taps i >= k none.
+  const std::int64_t a = std::clamp<std::int64_t>(k - n, -1, last);
+  const std::int64_t b = std::min<std::int64_t>(k - 1, last);
+  double sum = static_cast<double>(n) * p_[static_cast<std::size_t>(a + 1)];
+  if (b >= a + 1) {
+    sum += static_cast<double>(k) * (p_[static_cast<std::size_t>(b + 1)] - p_[static_cast<std::size_t>(a + 1)]) -
+           (pi_[static_cast<std::size_t>(b + 1)] - pi_[static_cast<std::size_t>(a + 1)]);
+  }
+  return sum;
+}
+
+void Interpolator::configure(const InterpolatorParams& p, const Eigen::Vector3d& start_mm) {
+  if (p.capacity < 4) throw std::invalid_argument("interpolator capacity must be >= 4");
+  if (!(p.override_max >= 0.0)) throw std::invalid_argument("override_max must be >= 0");
+  p_ = p;
+  fir_.configure(p.fir_taps, p.fir2_taps);
+  ring_.assign(p.capacity, PlannedSegment{});
+  cap_ = p.capacity;
+  head_ = count_ = 0;
+  shift_ = 0;
+  base_mm_ = start_mm;
+  base_progress_mm_ = 0.0;
+  tau_ = 0.0;
+  // Start at 100 %: the plan itself starts from rest, a ramp here would only stretch time.
+  ovr_ = std::min(1.0, p.override_max);
+  holding_ = resumed_hold_ = done_ = false;
+  last_ = InterpOutput{};
+  last_.position_mm = start_mm;
+}
+
+bool Interpolator::push(const PlannedSegment& seg) noexcept {
+  if (count_ == cap_) return false;
+  PlannedSegment s = seg;
+  s.start_cycle += shift_;
+  // A block that arrives after its planned start (planner starved the RT loop) may only start
+  // from rest: after every queued block has stopped, which is the path the planner verified
+  // (it always assumes a stop after the newest block).
+  const auto now = static_cast<std::int64_t>(std::ceil(tau_));
+  if (s.start_cycle < now) {
+    std::int64_t from = now;
+    for (std::size_t i = 0; i < count_; ++i) {
+      const PlannedSegment& q = at(i);
+      if (q.kind == SegmentKind::kMotion)
+        from = std::max(from, q.start_cycle + q.samples + fir_.length() - 1);
+    }
+    shift_ += from - s.start_cycle;
+    s.start_cycle = from;
+  }
+  ring_[(head_ + count_) % cap_] = s;
+  ++count_;
+  return true;
+}
+
+void Interpolator::resume() noexcept {
+  if (holding_) resumed_hold_ = true;
+}
+
+Eigen::Vector3d Interpolator::position_at(std::int64_t t, double* progress_mm,
+                                          int* line) const noexcept {
+  Eigen::Vector3d q = base_mm_;
+  double prog = base_progress_mm_;
+  int ln = last_line_;
+  for (std::size_t i = 0; i < count_; ++i) {
+    const PlannedSegment& s = at(i);
+    if (s.kind != SegmentKind::kMotion) continue;
+    if (s.start_cycle > t) break;
+    const double f = fir_.progress(t - s.start_cycle, s.samples) / static_cast<double>(s.samples);
+    q += f * (s.end_mm - s.start_mm);
+    prog += f * s.length_mm;
+    ln = s.line;
+  }
+  if (progress_mm != nullptr) *progress_mm = prog;
+  if (line != nullptr) *line = ln;
+  return q;
+}
+
+void Interpolator::drop_finished(std::int64_t t) noexcept {
+  const std::int64_t tail = fir_.length() - 1;
+  while (count_ > 0) {
+    const PlannedSegment& s = at(0);
+    if (s.kind != SegmentKind::kMotion) break;
+    if (s.start_cycle + s.samples + tail > t) break;
+    base_mm_ = s.end_mm;
+    base_progress_mm_ = s.path_start_mm + s.length_mm;
+    last_line_ = s.line;
+    last_.spindle = s.spindle;
+    last_.spindle_rpm = s.spindle_rpm;
+    last_.mist = s.mist;
+    last_.flood = s.flood;
+    last_.tool = s.tool;
+    head_ = (head_ + 1) % cap_;
+    --count_;
+  }
+}
+
+InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexcept {
+  if (done_) {
+    out = last_;
+    return out.status;
+  }
+  double target = std::isnan(override_ratio) ? 0.0 : std::clamp(override_ratio, 0.0, p_.override_max);
+  if (holding_) {
+    if (!resumed_hold_) {
+      ovr_ = 0.0;
+      last_.status = InterpStatus::kHolding;
+      out = last_;
+      return out.status;
+    }
+    // Leave the hold marker behind.
+    holding_ = resumed_hold_ = false;
+    head_ = (head_ + 1) % cap_;
+    --count_;
+    last_.message_id = -1;
+  }
+  // Spread override changes over at least t_A (rate limit 1/(L-1) per period).
+  const double rate = 1.0 / std::max(1, fir_.length() - 1);
+  ovr_ += std::clamp(target - ovr_, -rate, rate);
+
+  // Horizon: the first marker, else where the last queued block stops (starvation stop).
+  double limit = tau_;
+  const PlannedSegment* marker = nullptr;
+  const std::int64_t tail = fir_.length() - 1;
+  for (std::size_t i = 0; i < count_; ++i) {
+    const PlannedSegment& s = at(i);
+    // Later entries start after this cycle can reach: the horizon is at least there (keeps the
+    // scan O(blocks in motion) instead of O(queue)).
+    if (static_cast<double>(s.start_cycle) > tau_ + p_.override_max + 2.0) {
+      limit = std::max(limit, static_cast<double>(s.start_cycle));
+      break;
+    }
+    if (s.kind != SegmentKind::kMotion) {
+      marker = &s;
+      limit = static_cast<double>(s.start_cycle);
+      break;
+    }
+    limit = std::max(limit, static_cast<double>(s.start_cycle + s.samples + tail));
+  }
+  const double next = std::min(tau_ + ovr_, std::max(limit, tau_));
+  tau_ = next;
+  InterpStatus st = InterpStatus::kRunning;
+  if (count_ == 0) st = base_progress_mm_ > 0.0 ? InterpStatus::kStarved : InterpStatus::kIdle;
+  if (tau_ >= limit) {
+    if (marker != nullptr) {
+      if (marker->kind == SegmentKind::kEnd) {
+        st = InterpStatus::kDone;
+      } else if (marker->kind == SegmentKind::kOptionalHold && !p_.optional_stop) {
+        // Marker is the first non-motion entry; all motion before it has finished at `limit`.
+        drop_finished(static_cast<std::int64_t>(limit));
+        if (count_ > 0 && at(0).kind == SegmentKind::kOptionalHold) {
+          head_ = (head_ + 1) % cap_;
+          --count_;
+        }
+      } else {
+        st = InterpStatus::kHolding;
+        holding_ = true;
+        last_.message_id = marker->message_id;
+        ovr_ = 0.0;
+      }
+    } else if (count_ > 0) {
+      st = InterpStatus::kStarved;
+    }
+  }
+  const auto t0 = static_cast<std::int64_t>(std::floor(tau_));
+  drop_finished(t0);
+  const double frac = tau_ - static_cast<double>(t0);
+  double prog0 = 0.0;
+  int ln = 0;
+  Eigen::Vector3d q = position_at(t0, &prog0, &ln);
+  if (frac > 0.0) {
+    double prog1 = 0.0;
+    const Eigen::Vector3d q1 = position_at(t0 + 1, &prog1, nullptr);
+    q += frac * (q1 - q);
+    prog0 += frac * (prog1 - prog0);
+  }
+  if (st == InterpStatus::kHolding) {
+    drop_finished(t0);
+    if (count_ > 0) {
+      // The hold marker must now be at the front (motion before it has stopped).
+      last_.message_id = at(0).kind == SegmentKind::kMotion ? -1 : at(0).message_id;
+    }
+  }
+  if (st == InterpStatus::kDone) {
+    done_ = true;
+    q = base_mm_;  // exact final point: end_mm of the last finished block
+  }
+  // Modal state of the newest block in motion.
+  for (std::size_t i = 0; i < count_; ++i) {
+    const PlannedSegment& s = at(i);
+    if (s.kind != SegmentKind::kMotion || s.start_cycle > t0) break;
+    last_.spindle = s.spindle;
+    last_.spindle_rpm = s.spindle_rpm;
+    last_.mist = s.mist;
+    last_.flood = s.flood;
+    last_.tool = s.tool;
+  }
+  last_.position_mm = q;
+  last_.path_progress_mm = prog0;
+  last_.line = ln;
+  last_.override_applied = ovr_;
+  last_.plan_time_cycles = tau_;
+  last_.status = st;
+  out = last_;
+  return st;
+}
+
+}  // namespace contour::control

@@ -1,0 +1,139 @@
+#pragma once
+// FIR interpolator (seed 004 §1, eq 1): each block is a rectangular feed command (N_b samples of
+// delta_b / N_b) fed through a moving-average FIR filter of t_A/T + 1 taps (optionally a second
+// cascaded stage: trapezoidal -> jerk-limited S-curve). By linearity the output is the sum of every
+// block's individually filtered profile, so block overlap = starting block b+1's command before
+// block b's filtered output has stopped.
+//
+// Time base: "plan time" t counts interpolation periods; q(t) is the reference point after t
+// periods. A segment with command start s and N samples contributes delta * P(t - s) / N, where
+// P(k) = sum_i w_i clamp(k - i, 0, N) (FirFilter::progress, O(1) from prefix sums). It has stopped
+// at t = s + N + L - 1 (L = filter length in taps).
+//
+// Interpolator: the RT consumer. step() is noexcept, allocation-free, O(blocks in motion <= L);
+// the segment ring is sized at configure(). Feed override (0..max) scales the plan-time advance
+// per cycle (path unchanged: between plan samples the point moves on the straight chord between
+// consecutive plan samples, which is the path the planner verified); the override is rate-limited
+// so its change is spread over at least t_A. It starts at 100 %; while it is not 100 % the output
+// points lie on the verified plan chords but the straight line between two output points may cut a
+// plan sample vertex by the sagitta of two consecutive plan chords (sub-um at 1 ms).
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "control/gcode.hpp"
+
+namespace contour::control {
+
+class FirFilter {
+ public:
+  // taps1 >= 1 (t_A/T + 1 in the paper's convention), taps2 = 0 for one stage, else >= 1.
+  void configure(int taps1, int taps2);
+  [[nodiscard]] int length() const noexcept { return length_; }  // total taps L
+  // Filtered command progress in samples (0..n) after k command periods of an n-sample block.
+  [[nodiscard]] double progress(std::int64_t k, std::int64_t n) const noexcept;
+
+ private:
+  int length_ = 1;
+  std::vector<double> w_;   // impulse response, sums to 1
+  std::vector<double> p_;   // prefix sums of w (size L+1)
+  std::vector<double> pi_;  // prefix sums of i*w_i (size L+1)
+};
+
+enum class SegmentKind : std::uint8_t { kMotion, kHold, kOptionalHold, kEnd };
+
+// One planned micro-block (a line or an arc chord) with its command start time. Produced by
+// BlendPlanner (non-RT), consumed by Interpolator (RT). Trivially copyable.
+struct PlannedSegment {
+  SegmentKind kind = SegmentKind::kMotion;
+  std::int64_t start_cycle = 0;  // s: first command period
+  std::int64_t samples = 0;      // N >= 1 for motion
+  Eigen::Vector3d start_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d end_mm = Eigen::Vector3d::Zero();
+  double length_mm = 0.0;
+  double path_start_mm = 0.0;  // programmed arc length at the segment start
+  double feed_mm_min = 0.0;    // programmed (after axis-limit clamping)
+  int line = 0;                // source line
+  SpindleDir spindle = SpindleDir::kOff;
+  double spindle_rpm = 0.0;
+  bool mist = false;
+  bool flood = false;
+  int tool = 0;
+  int message_id = -1;  // holds: index into the planner's message table
+};
+
+enum class InterpStatus : std::uint8_t {
+  kIdle,      // nothing queued yet
+  kRunning,
+  kHolding,   // at M0/M1/M6: waits for resume()
+  kStarved,   // queue ran dry mid-program: stopped on the path (exact stop at the last vertex)
+  kDone       // end of program reached; reference is exactly the final point
+};
+
+struct InterpOutput {
+  Eigen::Vector3d position_mm = Eigen::Vector3d::Zero();
+  double path_progress_mm = 0.0;  // blended programmed arc length
+  int line = 0;                   // source line of the newest segment in motion
+  double override_applied = 1.0;  // after rate limiting
+  double plan_time_cycles = 0.0;
+  SpindleDir spindle = SpindleDir::kOff;
+  double spindle_rpm = 0.0;
+  bool mist = false;
+  bool flood = false;
+  int tool = 0;
+  int message_id = -1;  // while holding
+  InterpStatus status = InterpStatus::kIdle;
+};
+
+struct InterpolatorParams {
+  int fir_taps = 101;       // t_A/T + 1
+  int fir2_taps = 0;        // second stage (0 = off)
+  double period_s = 0.001;
+  double override_max = 1.5;
+  bool optional_stop = false;  // M1 holds when true
+  std::size_t capacity = 4096;  // segment ring size (> blocks in motion at once)
+};
+
+class Interpolator {
+ public:
+  // Setup-time: allocates the ring. Throws std::invalid_argument on bad parameters.
+  void configure(const InterpolatorParams& p, const Eigen::Vector3d& start_mm);
+
+  // Producer side: call from the RT thread (the daemon drains the planner's SPSC queue into it at
+  // the start of a cycle) or the single thread of contour-sim. Returns false when the ring is full.
+  // Segments arrive in start order. A segment whose start is already past is delayed until every
+  // queued block has stopped (never a path change).
+  bool push(const PlannedSegment& s) noexcept;
+  [[nodiscard]] std::size_t free_slots() const noexcept { return cap_ - count_; }
+
+  // One interpolation period. override in [0, override_max] (clamped; NaN -> 0). noexcept, no
+  // allocation, O(L). Time budget: < 5 us on the target for L = 101 (bench_planner.cpp).
+  InterpStatus step(double override_ratio, InterpOutput& out) noexcept;
+  void resume() noexcept;
+
+  // Reference point at an integer plan time using the queued segments (RT-safe, no state change).
+  [[nodiscard]] Eigen::Vector3d position_at(std::int64_t t, double* progress_mm = nullptr,
+                                            int* line = nullptr) const noexcept;
+
+ private:
+  const PlannedSegment& at(std::size_t i) const noexcept { return ring_[(head_ + i) % cap_]; }
+  void drop_finished(std::int64_t t) noexcept;
+
+  InterpolatorParams p_;
+  FirFilter fir_;
+  std::vector<PlannedSegment> ring_;
+  std::size_t cap_ = 0, head_ = 0, count_ = 0;
+  Eigen::Vector3d base_mm_ = Eigen::Vector3d::Zero();  // end of the last dropped segment
+  double base_progress_mm_ = 0.0;
+  int last_line_ = 0;
+  double tau_ = 0.0;  // plan time
+  std::int64_t shift_ = 0;  // added to start_cycle after a starvation stop
+  double ovr_ = 0.0;  // applied override
+  bool holding_ = false;
+  bool resumed_hold_ = false;
+  bool done_ = false;
+  InterpOutput last_{};
+};
+
+}  // namespace contour::control

@@ -1,0 +1,155 @@
+// FIR filter and RT interpolator: filter algebra, no allocation per cycle, exact end point, feed
+// override keeps the path, holds.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "control/blend_planner.hpp"
+#include "control/fir_interpolator.hpp"
+#include "tests/support/alloc_counter.hpp"
+
+using namespace contour::control;
+using Eigen::Vector3d;
+
+namespace {
+double brute_progress(int taps1, int taps2, std::int64_t k, std::int64_t n) {
+  // Direct convolution of the command ramp with one or two boxes.
+  auto cmd = [&](std::int64_t m) { return static_cast<double>(std::clamp<std::int64_t>(m, 0, n)); };
+  auto box1 = [&](std::int64_t kk) {
+    double s = 0;
+    for (int i = 0; i < taps1; ++i) s += cmd(kk - i);
+    return s / taps1;
+  };
+  if (taps2 == 0) return box1(k);
+  double s = 0;
+  for (int j = 0; j < taps2; ++j) s += box1(k - j);
+  return s / taps2;
+}
+
+std::vector<PlannedSegment> plan_square(BlendMode mode) {
+  PlannerParams pp;
+  BlendPlanner pl(pp, Vector3d::Zero());
+  const Vector3d pts[] = {{0, 0, 0}, {10, 0, 0}, {10, 10, 0}, {0, 10, 0}, {0, 0, 1}};
+  for (int i = 1; i < 5; ++i) {
+    Block b;
+    b.line = i;
+    b.feed_mm_min = 1500;
+    b.blend = mode;
+    b.tolerance_mm = 0.02;
+    b.seg = PathSegment::line(pts[i - 1], pts[i]);
+    pl.push(b);
+  }
+  Block e;
+  e.kind = BlockKind::kEnd;
+  pl.push(e);
+  std::vector<PlannedSegment> out;
+  PlannedSegment s;
+  while (pl.pop(s)) out.push_back(s);
+  return out;
+}
+}  // namespace
+
+TEST(FirFilter, ClosedFormMatchesConvolution) {
+  FirFilter f;
+  for (int t2 : {0, 1, 7, 40}) {
+    f.configure(11, t2);
+    for (std::int64_t n : {1, 3, 10, 11, 25, 200})
+      for (std::int64_t k = -3; k < n + 70; ++k)
+        EXPECT_NEAR(f.progress(k, n), brute_progress(11, t2, k, n), 1e-9) << t2 << " " << n << " " << k;
+  }
+}
+
+TEST(Interpolator, StepDoesNotAllocateAndEndsExactly) {
+  const auto segs = plan_square(BlendMode::kLimited);
+  Interpolator ip;
+  InterpolatorParams p;
+  ip.configure(p, Vector3d::Zero());
+  for (const auto& s : segs) ASSERT_TRUE(ip.push(s));
+  InterpOutput out;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> ovr(0.0, 1.5);
+  int cycles = 0;
+  {
+    contour::test::AllocGuard g;
+    for (; cycles < 10000; ++cycles) {
+      if (ip.step(cycles % 500 < 250 ? ovr(rng) : 1.0, out) == InterpStatus::kDone) break;
+    }
+    EXPECT_EQ(g.counts().total(), 0u);
+  }
+  while (ip.step(1.0, out) != InterpStatus::kDone) ASSERT_LT(++cycles, 100000);
+  EXPECT_EQ(out.position_mm, Vector3d(0, 0, 1));  // exactly the last programmed point
+  EXPECT_EQ(out.line, 4);
+  // Further steps stay there.
+  ip.step(1.0, out);
+  EXPECT_EQ(out.position_mm, Vector3d(0, 0, 1));
+}
+
+TEST(Interpolator, OverrideScalesTimeNotPath) {
+  const auto segs = plan_square(BlendMode::kFull);
+  auto run = [&](double ovr, std::vector<Vector3d>& pts) {
+    Interpolator ip;
+    InterpolatorParams p;
+    ip.configure(p, Vector3d::Zero());
+    for (const auto& s : segs) ip.push(s);
+    InterpOutput out;
+    int n = 0;
+    while (ip.step(ovr, out) != InterpStatus::kDone && n < 1000000) {
+      pts.push_back(out.position_mm);
+      ++n;
+    }
+    return n;
+  };
+  std::vector<Vector3d> full{Vector3d::Zero()}, half;
+  const int n1 = run(1.0, full);
+  const int n2 = run(0.5, half);
+  EXPECT_NEAR(static_cast<double>(n2) / n1, 2.0, 0.05);
+  // Every half-speed point lies on the chord polyline of the 100 % run.
+  for (std::size_t i = 0; i < half.size(); i += 7) {
+    double d = 1e9;
+    for (std::size_t j = 1; j < full.size(); ++j) {
+      const Vector3d a = full[j - 1], b = full[j];
+      const double l2 = (b - a).squaredNorm();
+      const double t = l2 > 0 ? std::clamp((half[i] - a).dot(b - a) / l2, 0.0, 1.0) : 0.0;
+      d = std::min(d, (half[i] - (a + t * (b - a))).norm());
+    }
+    ASSERT_LT(d, 1e-9) << i << " of " << half.size() << " " << half[i].transpose();
+  }
+}
+
+TEST(Interpolator, HoldsAtProgramStopUntilResumed) {
+  PlannerParams pp;
+  BlendPlanner pl(pp, Vector3d::Zero());
+  Block a;
+  a.line = 1;
+  a.feed_mm_min = 1200;
+  a.seg = PathSegment::line(Vector3d::Zero(), Vector3d(5, 0, 0));
+  pl.push(a);
+  Block h;
+  h.kind = BlockKind::kToolChange;
+  h.line = 2;
+  h.message = "tool 3";
+  pl.push(h);
+  Block b = a;
+  b.line = 3;
+  b.seg = PathSegment::line(Vector3d(5, 0, 0), Vector3d(5, 5, 0));
+  pl.push(b);
+  Block e;
+  e.kind = BlockKind::kEnd;
+  pl.push(e);
+  Interpolator ip;
+  ip.configure(InterpolatorParams{}, Vector3d::Zero());
+  PlannedSegment s;
+  while (pl.pop(s)) ip.push(s);
+  InterpOutput out;
+  int n = 0;
+  while (ip.step(1.0, out) != InterpStatus::kHolding) ASSERT_LT(++n, 100000);
+  EXPECT_EQ(out.position_mm, Vector3d(5, 0, 0));
+  ASSERT_GE(out.message_id, 0);
+  EXPECT_EQ(pl.messages()[static_cast<std::size_t>(out.message_id)], "tool 3");
+  for (int i = 0; i < 100; ++i) EXPECT_EQ(ip.step(1.0, out), InterpStatus::kHolding);
+  ip.resume();
+  while (ip.step(1.0, out) != InterpStatus::kDone) ASSERT_LT(++n, 100000);
+  EXPECT_EQ(out.position_mm, Vector3d(5, 5, 0));
+}
