@@ -1,11 +1,124 @@
 #include "config/control_config.hpp"
 
+#include <limits>
+#include <stdexcept>
+
 namespace contour::config {
 
-// Schema not defined yet: every key present is reported as unknown by Section::finish().
+namespace {
+void read3(Section& s, const std::string& key, std::array<double, 3>& out, double min, double max) {
+  if (!s.has(key)) {
+    s.accept(key);
+    return;
+  }
+  if (s.node()[key].IsScalar()) {
+    // One value: applies to every axis.
+    const double x = s.number(key, out[0], min, max);
+    out = {x, x, x};
+    return;
+  }
+  const std::vector<double> v = s.numbers(key, 1, 3);
+  for (std::size_t i = 0; i < v.size() && i < 3; ++i) {
+    if (v[i] < min || v[i] > max) {
+      s.error(key, "value " + std::to_string(v[i]) + " out of range [" + std::to_string(min) +
+                       ", " + std::to_string(max) + "]");
+      continue;
+    }
+    out[i] = v[i];
+  }
+  // One value given: applies to every axis.
+  if (v.size() == 1) out[1] = out[2] = out[0];
+}
+}  // namespace
+
+ControllerType parse_controller_type(const std::string& name) {
+  if (name == "p") return ControllerType::kP;
+  if (name == "pid") return ControllerType::kPid;
+  if (name == "ccc") return ControllerType::kCcc;
+  throw std::invalid_argument("controller must be p, pid or ccc, got '" + name + "'");
+}
+
+const char* controller_type_name(ControllerType t) {
+  switch (t) {
+    case ControllerType::kP:
+      return "p";
+    case ControllerType::kPid:
+      return "pid";
+    case ControllerType::kCcc:
+      return "ccc";
+  }
+  return "?";
+}
+
 ControlConfig parse_control(Section& s) {
-  (void)s;
-  return {};
+  ControlConfig c;
+  c.controller = parse_controller_type(s.choice("controller", "ccc", {"p", "pid", "ccc"}));
+  read3(s, "kp", c.kp, 0.0, 1e3);
+  {
+    Section pid = s.child("pid");
+    read3(pid, "kp", c.pid_kp, 0.0, 1e3);
+    read3(pid, "kd_s", c.pid_kd_s, 0.0, 1e3);
+    read3(pid, "ki_per_s", c.pid_ki_per_s, 0.0, 1e6);
+    pid.finish();
+  }
+  c.feed_forward = s.number("feed_forward", 0.0, 0.0, 1.0);
+  read3(s, "velocity_limit_mm_min", c.velocity_limit_mm_min, 0.0, 1e7);
+  {
+    Section cp = s.child("coupling");
+    c.coupling.enable = true;
+    c.coupling.cp = cp.number("cp", 15.0, 0.0, 1e4);
+    c.coupling.ci_per_s = cp.number("ci_per_s", 300.0, 0.0, 1e7);
+    c.coupling.cd_s = cp.number("cd_s", 0.3, 0.0, 1e3);
+    c.coupling.remove_tangential_integral = cp.boolean("remove_tangential_integral", true);
+    cp.finish();
+  }
+  const std::string model = s.choice("model", "circle", {"circle", "nearest", "linear"});
+  c.model = model == "nearest"  ? control::ModelKind::kNearestPoint
+            : model == "linear" ? control::ModelKind::kLinear
+                                : control::ModelKind::kCircle;
+  c.window_rule = s.choice("window_rule", "multi_step", {"multi_step", "literal"}) == "literal"
+                      ? control::WindowRule::kLiteral
+                      : control::WindowRule::kMultiStep;
+  c.window_capacity = static_cast<int>(s.integer("window_capacity", 256, 4, 1 << 20));
+  c.delay_compensation = s.boolean("delay_compensation", true);
+  return c;
+}
+
+control::ServoParams make_servo_params(const ControlConfig& cfg, ControllerType type,
+                                       const std::array<control::FeedDriveParams, 3>& drives,
+                                       int axes, double period_s, int delay_cycles) {
+  control::ServoParams p;
+  p.axes = axes;
+  p.period_s = period_s;
+  p.drive = drives;
+  p.delay_cycles = delay_cycles;
+  p.delay_compensation = cfg.delay_compensation;
+  p.law = type == ControllerType::kPid ? control::AxisLaw::kPid : control::AxisLaw::kP;
+  p.coupling = cfg.coupling;
+  p.coupling.enable = type == ControllerType::kCcc;
+  for (std::size_t i = 0; i < 3; ++i) {
+    control::AxisGains& g = p.axis[i];
+    if (type == ControllerType::kPid) {
+      g.kp = cfg.pid_kp[i];
+      g.kd_s = cfg.pid_kd_s[i];
+      g.ki_per_s = cfg.pid_ki_per_s[i];
+    } else {
+      g.kp = cfg.kp[i];
+    }
+    g.ff = cfg.feed_forward;
+    g.u_max_mm = cfg.velocity_limit_mm_min[i] > 0.0
+                     ? cfg.velocity_limit_mm_min[i] / 60.0 / drives[i].gain_per_s
+                     : std::numeric_limits<double>::infinity();
+  }
+  return p;
+}
+
+control::ContourErrorParams make_model_params(const ControlConfig& cfg) {
+  control::ContourErrorParams m;
+  m.kind = cfg.model;
+  m.rule = cfg.window_rule;
+  m.window_capacity = cfg.window_capacity;
+  return m;
 }
 
 }  // namespace contour::config

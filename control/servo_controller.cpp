@@ -1,0 +1,239 @@
+#include "control/servo_controller.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+namespace contour::control {
+
+void ServoController::configure(const ServoParams& p) {
+  if (p.axes < 1 || p.axes > kMaxServoAxes) throw std::invalid_argument("servo: axes must be 1..3");
+  if (!(p.period_s > 0.0)) throw std::invalid_argument("servo: period must be > 0");
+  if (p.delay_cycles < 0 || p.delay_cycles > FeedDrive::kMaxDelay) {
+    throw std::invalid_argument("servo: delay_cycles out of range");
+  }
+  for (int i = 0; i < p.axes; ++i) {
+    const auto& a = p.axis[static_cast<std::size_t>(i)];
+    if (a.kp < 0.0 || a.ki_per_s < 0.0 || a.kd_s < 0.0 || a.ff < 0.0 || a.ff > 1.0 ||
+        !(a.u_max_mm > 0.0)) {
+      throw std::invalid_argument("servo: axis gains must be >= 0, ff in [0,1], u_max > 0");
+    }
+    if (!(p.drive[static_cast<std::size_t>(i)].gain_per_s > 0.0)) {
+      throw std::invalid_argument("servo: drive gain must be > 0");
+    }
+  }
+  if (p.coupling.cp < 0.0 || p.coupling.ci_per_s < 0.0 || p.coupling.cd_s < 0.0) {
+    throw std::invalid_argument("servo: coupling gains must be >= 0");
+  }
+  p_ = p;
+  for (std::size_t i = 0; i < kMaxServoAxes; ++i) {
+    FeedDriveParams m = p_.drive[i];
+    m.period_s = p_.period_s;
+    m.blu_mm = 0.0;
+    m.delay_cycles = 0;
+    model_nd_[i].configure(m);
+    m.delay_cycles = p_.delay_compensation ? p_.delay_cycles : 0;
+    model_d_[i].configure(m);
+  }
+  reset();
+}
+
+void ServoController::reset() noexcept {
+  ia_.setZero();
+  e_prev_.setZero();
+  ic_.setZero();
+  eps_prev_.setZero();
+  first_ = true;
+  for (std::size_t i = 0; i < kMaxServoAxes; ++i) {
+    model_nd_[i].reset(0.0);
+    model_d_[i].reset(0.0);
+  }
+}
+
+Vec3 ServoController::predict(const Vec3& p_meas_mm) const noexcept {
+  Vec3 out = p_meas_mm;
+  if (!p_.delay_compensation || p_.delay_cycles == 0) return out;
+  for (int i = 0; i < p_.axes; ++i) {
+    const auto s = static_cast<std::size_t>(i);
+    out[i] += model_nd_[s].position_mm() - model_d_[s].position_mm();
+  }
+  return out;
+}
+
+ServoStatus ServoController::update(const Vec3& r_mm, const Vec3& p_hat_mm,
+                                    const ContourErrorResult& ce, const Vec3& v_ref_mm_s,
+                                    Vec3& u_out) noexcept {
+  const double t_s = p_.period_s;
+  const Vec3 e = r_mm - p_hat_mm;
+  Vec3 eps = ce.eps;
+  if (!eps.allFinite()) eps.setZero();
+  if (first_) {
+    e_prev_ = e;
+    eps_prev_ = eps;
+    first_ = false;
+  }
+  const Vec3 ia_old = ia_;
+  const Vec3 ic_old = ic_;
+  const bool pid = p_.law == AxisLaw::kPid;
+  if (pid) ia_ += t_s * e;
+  const bool couple = p_.coupling.enable;
+  if (couple) {
+    ic_ += t_s * eps;
+    if (p_.coupling.remove_tangential_integral && ce.tangent.squaredNorm() > 0.5) {
+      ic_ -= ce.tangent * ce.tangent.dot(ic_);
+    }
+  }
+  ServoStatus status = ServoStatus::kOk;
+  u_out.setZero();
+  for (int i = 0; i < p_.axes; ++i) {
+    const auto s = static_cast<std::size_t>(i);
+    const AxisGains& g = p_.axis[s];
+    double u = g.kp * e[i];
+    double integral_part = 0.0;
+    if (pid) {
+      integral_part += g.ki_per_s * ia_[i];
+      u += g.kd_s * (e[i] - e_prev_[i]) / t_s;
+    }
+    if (g.ff > 0.0) u += g.ff * v_ref_mm_s[i] / p_.drive[s].gain_per_s;
+    if (couple) {
+      const CouplingGains& c = p_.coupling;
+      u += c.cp * eps[i] + c.cd_s * (eps[i] - eps_prev_[i]) / t_s;
+      integral_part += c.ci_per_s * ic_[i];
+    }
+    u += integral_part;
+    if (!std::isfinite(u)) u = 0.0;
+    if (std::abs(u) > g.u_max_mm) {
+      status = ServoStatus::kSaturated;
+      const double sign = u > 0.0 ? 1.0 : -1.0;
+      // Conditional integration: undo this cycle's integration on this axis when it pushed the
+      // command further into the limit.
+      const double d_int =
+          (pid ? g.ki_per_s * (ia_[i] - ia_old[i]) : 0.0) +
+          (couple ? p_.coupling.ci_per_s * (ic_[i] - ic_old[i]) : 0.0);
+      if (d_int * sign > 0.0) {
+        ia_[i] = ia_old[i];
+        if (couple) ic_[i] = ic_old[i];
+      }
+      u = sign * g.u_max_mm;
+    }
+    u_out[i] = u;
+  }
+  e_prev_ = e;
+  eps_prev_ = eps;
+  if (p_.delay_compensation && p_.delay_cycles > 0) {
+    for (int i = 0; i < p_.axes; ++i) {
+      const auto s = static_cast<std::size_t>(i);
+      model_nd_[s].step(u_out[i]);
+      model_d_[s].step(u_out[i]);
+    }
+  }
+  return status;
+}
+
+namespace {
+
+// The scalar normal-direction loop as a linear state map. State layout:
+// [x, v, ubuf(d), I, e_prev, v_model, inc(d)].
+struct ScalarLoop {
+  double a, b_v, c_x, d_x;        // true plant
+  double am, bm, cm, dm;          // nominal model (Smith predictor)
+  double kp, ci, cd, t_s;
+  int d;
+  bool smith;
+  [[nodiscard]] int size() const { return 2 + d + 2 + 1 + d; }
+  void step(const Eigen::VectorXd& s, Eigen::VectorXd& out) const {
+    const double x = s[0], v = s[1];
+    const int ib = 2, ii = 2 + d, ie = 3 + d, ivm = 4 + d, iinc = 5 + d;
+    double delta = 0.0;
+    if (smith) {
+      for (int j = 0; j < d; ++j) delta += s[iinc + j];
+    }
+    const double e = -(x + delta);
+    const double integ = s[ii] + t_s * e;
+    const double u = kp * e + ci * integ + cd * (e - s[ie]) / t_s;
+    const double applied = d > 0 ? s[ib] : u;
+    out.setZero(s.size());
+    out[0] = x + c_x * v + d_x * applied;
+    out[1] = a * v + b_v * applied;
+    for (int j = 0; j + 1 < d; ++j) out[ib + j] = s[ib + j + 1];
+    if (d > 0) out[ib + d - 1] = u;
+    out[ii] = integ;
+    out[ie] = e;
+    out[ivm] = am * s[ivm] + bm * u;
+    for (int j = 0; j + 1 < d; ++j) out[iinc + j] = s[iinc + j + 1];
+    if (d > 0) out[iinc + d - 1] = cm * s[ivm] + dm * u;
+  }
+  [[nodiscard]] double radius() const {
+    const int n = size();
+    Eigen::MatrixXd m(n, n);
+    Eigen::VectorXd s(n), o(n);
+    for (int j = 0; j < n; ++j) {
+      s.setZero();
+      s[j] = 1.0;
+      step(s, o);
+      m.col(j) = o;
+    }
+    Eigen::EigenSolver<Eigen::MatrixXd> es(m, false);
+    return es.eigenvalues().cwiseAbs().maxCoeff();
+  }
+};
+
+void discretise(const FeedDriveParams& p, double gain, double& a, double& b, double& c,
+                double& d) {
+  const double tau = p.tau_s > 1e-12 ? p.tau_s : 1e-12;
+  a = std::exp(-p.period_s / tau);
+  b = (1.0 - a) * gain;
+  c = tau * (1.0 - a);
+  d = gain * (p.period_s - tau * (1.0 - a));
+}
+
+}  // namespace
+
+LoopMargin loop_margin(const FeedDriveParams& drive, const AxisGains& axis,
+                       const CouplingGains& coupling, int delay_cycles, bool smith_predictor,
+                       double plant_gain_scale) {
+  ScalarLoop l{};
+  discretise(drive, drive.gain_per_s * plant_gain_scale, l.a, l.b_v, l.c_x, l.d_x);
+  discretise(drive, drive.gain_per_s, l.am, l.bm, l.cm, l.dm);
+  const double c_on = coupling.enable ? 1.0 : 0.0;
+  l.kp = axis.kp + c_on * coupling.cp;
+  l.ci = axis.ki_per_s + c_on * coupling.ci_per_s;
+  l.cd = axis.kd_s + c_on * coupling.cd_s;
+  l.t_s = drive.period_s;
+  l.d = delay_cycles < 0 ? 0 : delay_cycles;
+  l.smith = smith_predictor;
+  LoopMargin m;
+  m.spectral_radius = l.radius();
+  // Bisection on a common factor g on all controller gains.
+  const ScalarLoop base = l;
+  auto stable_at = [&](double g) {
+    ScalarLoop s = base;
+    s.kp *= g;
+    s.ci *= g;
+    s.cd *= g;
+    return s.radius() < 1.0;
+  };
+  if (!stable_at(1.0)) {
+    double lo = 0.0, hi = 1.0;
+    for (int it = 0; it < 40; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      (stable_at(mid) ? lo : hi) = mid;
+    }
+    m.gain_margin = lo;
+    return m;
+  }
+  double lo = 1.0, hi = 2.0;
+  while (stable_at(hi) && hi < 1e4) {
+    lo = hi;
+    hi *= 2.0;
+  }
+  for (int it = 0; it < 40; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (stable_at(mid) ? lo : hi) = mid;
+  }
+  m.gain_margin = lo;
+  return m;
+}
+
+}  // namespace contour::control
