@@ -1,0 +1,212 @@
+#pragma once
+// Fixed-function CANopen master for CiA 402 drives (CiA 301 NMT/SDO/PDO/SYNC/EMCY/heartbeat).
+//
+// Threads: construction, start_up() and the SDO calls are non-RT (they block, allocate, throw
+// StartupError). begin_cycle(), collect(), send_rpdos() and the request setters are the RT
+// cycle: noexcept, allocation-free, O(nodes + frames received), returning a CycleStatus.
+// Budget: begin_cycle + send_rpdos are one write() per frame (~5 us each on vcan); collect()
+// blocks at most until the TPDO deadline (tpdo_deadline_us after the SYNC).
+//
+// Units: device units only (counts, counts/s, raw words). Scaling to mm is the caller's edge
+// (codec.hpp: counts_to_mm, mm_s_to_counts_s).
+//
+// Time: the RT functions take `now_ns` from the caller (CLOCK_MONOTONIC in the daemon, the
+// lockstep cycle time in tests) for heartbeat-consumer timeouts; the TPDO receive deadline is
+// wall-clock (CLOCK_MONOTONIC) because it bounds the cycle.
+//
+// Faults are latched per node (drive fault, heartbeat lost, missed-TPDO streak, unexpected
+// boot-up) and reported as MasterEvents through a fixed ring (pop_event, non-RT describe()).
+// The master never decides motion: the supervisor calls quick_stop_all() on a fault.
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "drivers/can/can_bus.hpp"
+#include "drivers/canopen/codec.hpp"
+
+namespace contour::drivers::canopen {
+
+enum class DriveMode : std::int8_t { kProfileVelocity = 3, kCsp = 8, kCsv = 9 };
+
+struct NodeSetup {
+  std::uint8_t node_id = 0;
+  std::string name;  // "X", "spindle": used in messages
+  DriveMode mode = DriveMode::kCsv;
+  std::uint16_t heartbeat_ms = 50;
+  std::uint16_t heartbeat_timeout_ms = 200;
+  std::uint32_t sync_window_us = 0;
+  std::uint8_t sync_every = 1;  // PDO transmission type
+  std::int16_t quick_stop_option = 2;
+  std::uint32_t quick_stop_decel = 2000000;  // counts/s^2
+  std::optional<std::uint32_t> device_type, vendor_id, product_code, revision;
+  PdoMapping rpdo;  // RPDO1, must contain 0x6040
+  PdoMapping tpdo;  // TPDO1, must contain 0x6041
+};
+
+struct MasterConfig {
+  std::vector<NodeSetup> nodes;
+  std::uint32_t period_us = 1000;
+  std::uint32_t bitrate = 1000000;
+  double load_ceiling = 0.80;  // worst-case fraction
+  std::uint8_t master_node_id = 0x7F;
+  std::uint16_t master_heartbeat_ms = 100;
+  int boot_timeout_ms = 2000;
+  int sdo_timeout_ms = 500;
+  int sdo_retries = 2;
+  int tpdo_deadline_us = 800;
+  int missed_tpdo_fault = 3;
+};
+
+class StartupError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+enum class CycleStatus : std::uint8_t { kOk, kFault };
+
+enum class NodeFault : std::uint8_t {
+  kNone = 0,
+  kDriveFault = 1,
+  kHeartbeatLost = 2,
+  kTpdoMissed = 4,
+  kUnexpectedBootUp = 8,
+};
+
+struct MasterEvent {
+  enum class Kind : std::uint8_t {
+    kEmcy,
+    kDriveFault,
+    kHeartbeatLost,
+    kTpdoMissedFault,
+    kUnexpectedBootUp,
+    kNmtStateChange,
+    kBusState,
+  };
+  Kind kind = Kind::kEmcy;
+  std::uint8_t node_id = 0;
+  std::uint16_t code = 0;       // EMCY code, statusword, NMT state, bus state
+  std::uint8_t error_register = 0;
+  std::uint64_t cycle = 0;
+};
+
+struct NodeRuntime {
+  Cia402State state = Cia402State::kUnknown;
+  std::uint16_t statusword = 0;
+  std::int32_t position_raw = 0;       // 0x6064 as received (wraps)
+  std::int64_t position_counts = 0;    // unwrapped
+  std::int32_t velocity_counts_s = 0;  // 0x606C when mapped
+  NmtState nmt = NmtState::kUnknown;
+  std::int64_t last_heartbeat_ns = 0;
+  std::uint32_t missed_streak = 0;
+  std::uint64_t missed_total = 0;
+  std::uint64_t tpdo_received = 0;
+  std::uint8_t faults = 0;  // NodeFault bits, latched
+  DriveRequest request = DriveRequest::kDisabled;
+  std::int32_t target = 0;  // CSV/PV: counts/s; CSP: counts
+  std::uint16_t controlword = 0;
+  bool tpdo_fresh = false;
+};
+
+struct MasterCounters {
+  std::uint64_t cycles = 0;
+  std::uint64_t unknown_frames = 0;    // COB-IDs the master does not consume
+  std::uint64_t malformed_frames = 0;  // known COB-ID, wrong length/content
+  std::uint64_t emcy_frames = 0;
+  std::uint64_t late_or_stray_frames = 0;
+  std::uint64_t tx_dropped = 0;
+  std::uint64_t rx_frames = 0;
+};
+
+class Master {
+ public:
+  using Log = std::function<void(const std::string&)>;
+
+  // Validates the mappings and the bus load (throws StartupError above the ceiling).
+  Master(CanBus& bus, MasterConfig cfg, Log log = {});
+
+  // Non-RT. NMT reset communication, boot-up wait, per-node SDO configuration, NMT start.
+  // Throws StartupError naming node, object and abort text.
+  void start_up();
+
+  // Non-RT SDO client (timeout sdo_timeout_ms, retries on timeout; server aborts are not
+  // retried). Throws StartupError("node 2 (Y): SDO download 0x6060:00: 0x06090030 ...").
+  std::vector<std::uint8_t> sdo_upload(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub);
+  void sdo_download(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub,
+                    std::span<const std::uint8_t> data);
+  void sdo_download_u8(std::uint8_t n, std::uint16_t i, std::uint8_t s, std::uint8_t v);
+  void sdo_download_u16(std::uint8_t n, std::uint16_t i, std::uint8_t s, std::uint16_t v);
+  void sdo_download_u32(std::uint8_t n, std::uint16_t i, std::uint8_t s, std::uint32_t v);
+  std::uint32_t sdo_upload_u32(std::uint8_t n, std::uint16_t i, std::uint8_t s);
+
+  // ---- RT cycle
+  CycleStatus begin_cycle(std::int64_t now_ns) noexcept;  // SYNC first, then master heartbeat
+  CycleStatus collect() noexcept;                          // TPDOs until all in or deadline
+  CycleStatus send_rpdos() noexcept;                       // controlword + target per node
+
+  void set_request(std::size_t i, DriveRequest r) noexcept { rt_[i].request = r; }
+  void set_request_all(DriveRequest r) noexcept;
+  void quick_stop_all() noexcept { set_request_all(DriveRequest::kQuickStop); }
+  void set_target(std::size_t i, std::int32_t v) noexcept { rt_[i].target = v; }
+  // Lets the sequencers send the fault-reset edge and clears the latched master-side faults.
+  void reset_faults() noexcept;
+
+  [[nodiscard]] bool all_enabled() const noexcept;
+  [[nodiscard]] bool any_fault() const noexcept;
+  [[nodiscard]] std::size_t size() const noexcept { return rt_.size(); }
+  [[nodiscard]] const NodeRuntime& node(std::size_t i) const noexcept { return rt_[i]; }
+  [[nodiscard]] const NodeSetup& setup(std::size_t i) const noexcept { return cfg_.nodes[i]; }
+  [[nodiscard]] int index_of(std::uint8_t node_id) const noexcept;
+  [[nodiscard]] const MasterCounters& counters() const noexcept { return counters_; }
+  [[nodiscard]] const BusLoad& bus_load() const noexcept { return load_; }
+  [[nodiscard]] const MasterConfig& config() const noexcept { return cfg_; }
+
+  bool pop_event(MasterEvent& e) noexcept;
+  // Non-RT text: "EMCY node 2 (Y): 0x2310 continuous over-current, error register 0x03".
+  std::string describe(const MasterEvent& e) const;
+
+ private:
+  void dispatch(const CanFrame& f, bool in_cycle) noexcept;
+  void push_event(const MasterEvent& e) noexcept;
+  void configure_node(const NodeSetup& n);
+  void configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m);
+  std::vector<std::uint8_t> run_sdo(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub,
+                                    bool upload, std::span<const std::uint8_t> data);
+  std::string node_label(std::uint8_t node_id) const;
+  void wait_boot_ups();
+  void log(const std::string& s) const {
+    if (log_) log_(s);
+  }
+
+  CanBus& bus_;
+  MasterConfig cfg_;
+  Log log_;
+  BusLoad load_{};
+  std::vector<NodeRuntime> rt_;
+  std::vector<Cia402Sequencer> seq_;
+  std::vector<PositionUnwrapper> unwrap_;
+  std::array<std::int16_t, 128> index_by_node_{};
+  std::vector<bool> booted_;
+  MasterCounters counters_{};
+  std::array<MasterEvent, 256> events_{};
+  std::size_t ev_head_ = 0, ev_tail_ = 0;
+  std::int64_t now_ns_ = 0;
+  std::int64_t last_master_hb_ns_ = -1;
+  std::int64_t sync_mono_ns_ = 0;
+  bool fault_reset_ = false;
+  bool cycling_ = false;
+};
+
+// Kernel receive filters for the master's socket: EMCY, TPDO1, SDO responses and heartbeats of
+// the configured nodes (everything else is dropped by the kernel, not by the RT thread).
+std::vector<CanFilter> master_rx_filters(const MasterConfig& cfg);
+
+// The default leanest mappings (issue 7): RPDO {0x6040, 0x60FF|0x607A}, TPDO {0x6041, 0x6064}.
+PdoMapping default_rpdo(DriveMode m);
+PdoMapping default_tpdo();
+
+}  // namespace contour::drivers::canopen

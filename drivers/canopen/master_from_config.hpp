@@ -1,0 +1,59 @@
+#pragma once
+// Setup-time adapter: the validated `loop:`, `safety:`, `machine:` and `bus:` config -> MasterConfig. Header-only so
+// contour::drivers itself does not link contour::config; the composition root (daemon, tests,
+// tools) that includes this links both.
+#include <cmath>
+
+#include "config/config.hpp"
+#include "drivers/canopen/master.hpp"
+
+namespace contour::drivers::canopen {
+
+inline PdoMapping to_mapping(const std::vector<config::BusPdoEntry>& v) {
+  PdoMapping m;
+  for (const auto& e : v) {
+    if (m.count >= PdoMapping::kMaxEntries) break;
+    m.entries[m.count++] = PdoEntry{e.index, e.sub, e.bits};
+  }
+  return m;
+}
+
+// Throws config::ConfigError (duplicate node-ids, ...).
+inline MasterConfig master_config_from(const config::Config& cfg) {
+  const config::BusConfig& bus = cfg.bus;
+  const config::MachineConfig& machine = cfg.machine;
+  MasterConfig c;
+  c.period_us = static_cast<std::uint32_t>(cfg.loop.period_us);
+  c.bitrate = static_cast<std::uint32_t>(bus.bitrate);
+  c.load_ceiling = bus.load_ceiling_percent / 100.0;
+  c.master_heartbeat_ms = static_cast<std::uint16_t>(bus.master_heartbeat_ms);
+  c.boot_timeout_ms = bus.boot_timeout_ms;
+  c.sdo_timeout_ms = bus.sdo_timeout_ms;
+  c.sdo_retries = bus.sdo_retries;
+  c.tpdo_deadline_us = cfg.loop.tpdo_deadline_us;
+  c.missed_tpdo_fault = cfg.safety.missed_tpdo_streak;
+  for (const auto& n : config::resolve_bus_nodes(bus, machine)) {
+    NodeSetup s;
+    s.node_id = static_cast<std::uint8_t>(n.node_id);
+    s.name = n.role;
+    s.mode = n.mode == "csp" ? DriveMode::kCsp
+             : n.mode == "pv" ? DriveMode::kProfileVelocity
+                              : DriveMode::kCsv;
+    s.heartbeat_ms = static_cast<std::uint16_t>(n.heartbeat_ms);
+    s.heartbeat_timeout_ms = static_cast<std::uint16_t>(n.heartbeat_timeout_ms);
+    s.sync_window_us = static_cast<std::uint32_t>(n.sync_window_us);
+    s.sync_every = static_cast<std::uint8_t>(n.sync_every);
+    s.quick_stop_option = static_cast<std::int16_t>(n.quick_stop_option);
+    s.quick_stop_decel = static_cast<std::uint32_t>(n.quick_stop_decel);
+    s.device_type = n.identity.device_type;
+    s.vendor_id = n.identity.vendor_id;
+    s.product_code = n.identity.product_code;
+    s.revision = n.identity.revision;
+    s.rpdo = to_mapping(n.rpdo);
+    s.tpdo = to_mapping(n.tpdo);
+    c.nodes.push_back(s);
+  }
+  return c;
+}
+
+}  // namespace contour::drivers::canopen

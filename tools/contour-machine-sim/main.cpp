@@ -1,0 +1,204 @@
+// contour-machine-sim --config FILE --can IFACE [--modbus HOST:PORT] [fault flags]
+// The simulated machine for HIL: one process answering every bus node of the config (axes from
+// machine.axes[].node_id, the spindle from bus.spindle.node_id) as CiA 402 drives on SocketCAN,
+// advancing one plant step per SYNC (lockstep). Prints "ready: ..." on stdout once listening and a
+// JSON summary as its last line on SIGINT/SIGTERM.
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <csignal>
+#include <cstdio>
+#include <ctime>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "config/config.hpp"
+#include "drivers/can/socket_can.hpp"
+#include "tools/contour-machine-sim/sim_drive.hpp"
+
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+void on_signal(int) { g_stop = 1; }
+
+std::int64_t mono_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+// "N:A[:B]" -> {N, A, B}; throws CLI::ValidationError.
+std::vector<long> parse_tuple(const std::string& s, std::size_t min_n, std::size_t max_n,
+                              const std::string& flag) {
+  std::vector<long> out;
+  std::size_t pos = 0;
+  while (pos <= s.size()) {
+    const std::size_t c = s.find(':', pos);
+    const std::string part = s.substr(pos, c == std::string::npos ? std::string::npos : c - pos);
+    char* end = nullptr;
+    const long v = std::strtol(part.c_str(), &end, 0);
+    if (part.empty() || *end != '\0') throw CLI::ValidationError(flag, "bad number '" + part + "' in '" + s + "'");
+    out.push_back(v);
+    if (c == std::string::npos) break;
+    pos = c + 1;
+  }
+  if (out.size() < min_n || out.size() > max_n) throw CLI::ValidationError(flag, "wrong field count in '" + s + "'");
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"contour-machine-sim: simulated CiA 402 machine on SocketCAN (lockstep with SYNC)"};
+  std::string config_path, iface, modbus;
+  std::vector<std::string> drop, fault, stop_hb, sdo_abort, malformed;
+  app.add_option("--config", config_path, "contourd YAML config (machine, bus)")->required();
+  app.add_option("--can", iface, "CAN interface, e.g. vcan0")->required();
+  app.add_option("--modbus", modbus, "HOST:PORT of the dynamometer Modbus TCP server");
+  app.add_option("--drop-tpdo", drop, "NODE:FROM_SYNC[:COUNT] drop TPDOs (COUNT 0 = forever)");
+  app.add_option("--fault", fault, "NODE:SYNC[:CODE] raise a drive fault (EMCY + statusword)");
+  app.add_option("--stop-heartbeat", stop_hb, "NODE:SYNC stop the node's heartbeats");
+  app.add_option("--sdo-abort", sdo_abort, "NODE:INDEX:SUB[:CODE] answer this object with an abort");
+  app.add_option("--malformed", malformed, "NODE:SYNC send malformed frames at this SYNC");
+  CLI11_PARSE(app, argc, argv);
+
+  contour::config::Config cfg;
+  std::vector<contour::config::BusNodeConfig> nodes;
+  try {
+    cfg = contour::config::load_config_file(config_path);
+    nodes = contour::config::resolve_bus_nodes(cfg.bus, cfg.machine);
+  } catch (const contour::config::ConfigError& e) {
+    for (const auto& m : e.errors()) std::cerr << m << "\n";
+    return 78;
+  }
+  if (nodes.empty()) {
+    std::cerr << config_path << ": no bus nodes (machine.axes[].node_id all 0, no bus.spindle)\n";
+    return 78;
+  }
+  if (!modbus.empty())
+    std::cerr << "contour-machine-sim: --modbus " << modbus
+              << ": the dynamometer is not wired into contour-machine-sim yet\n";
+
+  std::vector<contour::sim::SimDriveSetup> setups;
+  for (const auto& n : nodes) {
+    contour::sim::SimDriveSetup s;
+    s.node_id = static_cast<std::uint8_t>(n.node_id);
+    s.name = n.role;
+    s.spindle = n.role == "spindle";
+    s.period_s = cfg.machine.period_s;
+    if (n.identity.vendor_id) s.vendor_id = *n.identity.vendor_id;
+    if (n.identity.product_code) s.product_code = *n.identity.product_code;
+    if (n.identity.revision) s.revision = *n.identity.revision;
+    for (const auto& ax : cfg.machine.axes) {
+      if (ax.node_id != n.node_id) continue;
+      s.counts_per_mm = ax.counts_per_mm;
+      s.plant = ax.drive;
+      s.plant.period_s = cfg.machine.period_s;
+      // The CAN transport is one period of the configured delay (see sim_drive.hpp).
+      s.plant.delay_cycles = ax.drive.delay_cycles > 0 ? ax.drive.delay_cycles - 1 : 0;
+      if (ax.drive.delay_cycles == 0)
+        std::cerr << "contour-machine-sim: axis " << ax.name
+                  << ": delay_cycles 0 cannot be matched over CAN (one period is the minimum)\n";
+    }
+    if (s.spindle) s.counts_per_mm = 4096.0;  // counts per revolution
+    setups.push_back(s);
+  }
+  try {
+    auto find = [&](long node) -> contour::sim::SimDriveSetup& {
+      for (auto& s : setups)
+        if (s.node_id == node) return s;
+      throw CLI::ValidationError("node", "node-id " + std::to_string(node) + " is not simulated");
+    };
+    for (const auto& d : drop) {
+      auto v = parse_tuple(d, 2, 3, "--drop-tpdo");
+      auto& s = find(v[0]);
+      s.faults.drop_tpdo_from = v[1];
+      s.faults.drop_tpdo_count = v.size() > 2 ? v[2] : 0;
+    }
+    for (const auto& d : fault) {
+      auto v = parse_tuple(d, 2, 3, "--fault");
+      auto& s = find(v[0]);
+      s.faults.fault_at = v[1];
+      if (v.size() > 2) s.faults.fault_code = static_cast<std::uint16_t>(v[2]);
+    }
+    for (const auto& d : stop_hb) {
+      auto v = parse_tuple(d, 2, 2, "--stop-heartbeat");
+      find(v[0]).faults.stop_heartbeat_at = v[1];
+    }
+    for (const auto& d : sdo_abort) {
+      auto v = parse_tuple(d, 3, 4, "--sdo-abort");
+      auto& s = find(v[0]);
+      s.faults.sdo_abort_object = (static_cast<std::uint32_t>(v[1]) << 8) | static_cast<std::uint32_t>(v[2]);
+      if (v.size() > 3) s.faults.sdo_abort_code = static_cast<std::uint32_t>(v[3]);
+    }
+    for (const auto& d : malformed) {
+      auto v = parse_tuple(d, 2, 2, "--malformed");
+      find(v[0]).faults.malformed_at = v[1];
+    }
+  } catch (const CLI::Error& e) {
+    return app.exit(e);
+  }
+
+  std::unique_ptr<contour::drivers::SocketCan> bus;
+  try {
+    // Only what the drives consume: a flood of unrelated frames is dropped by the kernel and
+    // cannot push a SYNC out of the socket queue (lockstep would break).
+    std::vector<contour::drivers::CanFilter> filters{{0x000, 0x7FF}, {0x080, 0x7FF}};
+    for (const auto& s : setups) {
+      filters.push_back({0x200u + s.node_id, 0x7FF});
+      filters.push_back({0x600u + s.node_id, 0x7FF});
+    }
+    bus = std::make_unique<contour::drivers::SocketCan>(iface, filters);
+  } catch (const contour::drivers::SocketCanError& e) {
+    std::cerr << "contour-machine-sim: " << e.what() << "\n";
+    return 69;  // EX_UNAVAILABLE
+  }
+  std::uint64_t tx_frames = 0, rx_frames = 0;
+  auto send = [&](const contour::drivers::CanFrame& f) {
+    // The simulator may block briefly rather than drop: it must not lose lockstep answers.
+    for (int i = 0; i < 1000; ++i) {
+      if (bus->send(f) != contour::drivers::SendResult::kDropped) break;
+      bus->wait_readable(100000);
+    }
+    ++tx_frames;
+  };
+  std::vector<std::unique_ptr<contour::sim::SimDrive>> drives;
+  for (const auto& s : setups) drives.push_back(std::make_unique<contour::sim::SimDrive>(s, send));
+
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  for (auto& d : drives) d->power_on();
+  std::cout << "ready: " << iface << " nodes";
+  for (const auto& s : setups) std::cout << " " << int{s.node_id} << "(" << s.name << ")";
+  std::cout << std::endl;
+
+  contour::drivers::CanFrame f;
+  while (g_stop == 0) {
+    bus->wait_readable(5000000);
+    const std::int64_t now = mono_ns();
+    while (bus->receive(f)) {
+      ++rx_frames;
+      for (auto& d : drives) {
+        d->tick_wall(now);
+        d->on_frame(f);
+      }
+    }
+    for (auto& d : drives) d->tick_wall(now);
+  }
+  nlohmann::json j;
+  j["rx_frames"] = rx_frames;
+  j["tx_frames"] = tx_frames;
+  j["rx_overflow"] = bus->stats().rx_overflow;
+  for (const auto& d : drives) {
+    nlohmann::json n;
+    n["node_id"] = d->node_id();
+    n["syncs"] = d->syncs();
+    n["position_mm"] = d->position_mm();
+    n["state"] = contour::drivers::canopen::cia402_state_name(d->state());
+    j["nodes"].push_back(n);
+  }
+  std::cout << j.dump() << std::endl;
+  return 0;
+}

@@ -1,0 +1,506 @@
+#include "tools/contour-machine-sim/sim_drive.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace contour::sim {
+
+using drivers::CanFrame;
+namespace co = drivers::canopen;
+
+namespace {
+constexpr std::uint32_t key(std::uint16_t index, std::uint8_t sub) {
+  return (static_cast<std::uint32_t>(index) << 8) | sub;
+}
+std::vector<std::uint8_t> le(std::int64_t v, std::size_t n) {
+  std::vector<std::uint8_t> out(n);
+  for (std::size_t i = 0; i < n; ++i) out[i] = static_cast<std::uint8_t>((static_cast<std::uint64_t>(v) >> (8 * i)) & 0xFF);
+  return out;
+}
+bool rx_mappable(std::uint16_t i) { return i == 0x6040 || i == 0x607A || i == 0x60FF || i == 0x6060; }
+bool tx_mappable(std::uint16_t i) {
+  return i == 0x6041 || i == 0x6064 || i == 0x606C || i == 0x6061 || i == 0x603F;
+}
+}  // namespace
+
+SimDrive::SimDrive(SimDriveSetup setup, Send send) : s_(std::move(setup)), send_(std::move(send)) {
+  plant_.configure(s_.plant);
+  build_od();
+}
+
+void SimDrive::build_od() {
+  od_.clear();
+  auto ro = [&](std::uint16_t i, std::uint8_t s, std::int64_t v, std::size_t n) {
+    od_[key(i, s)] = Entry{le(v, n), false, true};
+  };
+  auto rw = [&](std::uint16_t i, std::uint8_t s, std::int64_t v, std::size_t n) {
+    od_[key(i, s)] = Entry{le(v, n), true, true};
+  };
+  ro(0x1000, 0, 0x00020192, 4);  // CiA 402, servo drive
+  ro(0x1001, 0, 0, 1);
+  const std::string name = "contour-machine-sim " + s_.name;
+  od_[key(0x1008, 0)] = Entry{std::vector<std::uint8_t>(name.begin(), name.end()), false, true};
+  ro(0x1018, 0, 4, 1);
+  ro(0x1018, 1, s_.vendor_id, 4);
+  ro(0x1018, 2, s_.product_code, 4);
+  ro(0x1018, 3, s_.revision, 4);
+  ro(0x1018, 4, s_.serial != 0 ? s_.serial : 0x1000 + s_.node_id, 4);
+  rw(0x1006, 0, 0, 4);
+  rw(0x1007, 0, 0, 4);
+  ro(0x1016, 0, 1, 1);
+  rw(0x1016, 1, 0, 4);
+  rw(0x1017, 0, 0, 2);
+  for (std::uint16_t k = 0; k < 4; ++k) {
+    const auto n = s_.node_id;
+    ro(static_cast<std::uint16_t>(0x1400 + k), 0, 2, 1);
+    rw(static_cast<std::uint16_t>(0x1400 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobRpdo[k] + n, 4);
+    rw(static_cast<std::uint16_t>(0x1400 + k), 2, 0xFF, 1);
+    ro(static_cast<std::uint16_t>(0x1800 + k), 0, 2, 1);
+    rw(static_cast<std::uint16_t>(0x1800 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobTpdo[k] + n, 4);
+    rw(static_cast<std::uint16_t>(0x1800 + k), 2, 0xFF, 1);
+    rw(static_cast<std::uint16_t>(0x1600 + k), 0, 0, 1);
+    rw(static_cast<std::uint16_t>(0x1A00 + k), 0, 0, 1);
+    for (std::uint8_t e = 1; e <= 8; ++e) {
+      rw(static_cast<std::uint16_t>(0x1600 + k), e, 0, 4);
+      rw(static_cast<std::uint16_t>(0x1A00 + k), e, 0, 4);
+    }
+  }
+  // Power-on mapping (a drive's own default, deliberately not the master's choice): RPDO1
+  // {controlword}, TPDO1 {statusword}; the master must remap.
+  set_int(0x1600, 1, 0x60400010);
+  set_int(0x1600, 0, 1);
+  set_int(0x1A00, 1, 0x60410010);
+  set_int(0x1A00, 0, 1);
+  ro(0x603F, 0, 0, 2);
+  rw(0x6040, 0, 0, 2);
+  ro(0x6041, 0, co::statusword_for(state_), 2);
+  rw(0x605A, 0, 2, 2);
+  rw(0x6060, 0, 0, 1);
+  ro(0x6061, 0, 0, 1);
+  ro(0x6064, 0, 0, 4);
+  ro(0x606C, 0, 0, 4);
+  rw(0x607A, 0, 0, 4);
+  rw(0x60FF, 0, 0, 4);
+  rw(0x6085, 0, 1000000, 4);
+  ro(0x60C2, 0, 2, 1);
+  rw(0x60C2, 1, 1, 1);
+  rw(0x60C2, 2, -3, 1);
+  od_defaults_ = od_;
+}
+
+SimDrive::Entry* SimDrive::find(std::uint16_t index, std::uint8_t sub) {
+  auto it = od_.find(key(index, sub));
+  return it == od_.end() ? nullptr : &it->second;
+}
+
+std::int64_t SimDrive::read_int(std::uint16_t index, std::uint8_t sub) const {
+  auto it = od_.find(key(index, sub));
+  if (it == od_.end()) return 0;
+  std::uint64_t v = 0;
+  const auto& b = it->second.value;
+  for (std::size_t i = 0; i < b.size() && i < 8; ++i) v |= static_cast<std::uint64_t>(b[i]) << (8 * i);
+  // sign-extend to the object's width
+  const std::size_t bits = 8 * b.size();
+  if (bits > 0 && bits < 64 && (v >> (bits - 1)) != 0) v |= ~0ULL << bits;
+  return static_cast<std::int64_t>(v);
+}
+std::uint32_t SimDrive::u32(std::uint16_t index, std::uint8_t sub) const {
+  return static_cast<std::uint32_t>(read_int(index, sub) & 0xFFFFFFFF);
+}
+void SimDrive::set_int(std::uint16_t index, std::uint8_t sub, std::int64_t v) {
+  auto it = od_.find(key(index, sub));
+  if (it == od_.end()) return;
+  it->second.value = le(v, it->second.value.size());
+}
+
+void SimDrive::power_on() {
+  od_ = od_defaults_;
+  state_ = co::Cia402State::kSwitchOnDisabled;
+  set_int(0x6041, 0, co::statusword_for(state_));
+  reset_communication();
+}
+
+void SimDrive::reset_communication() {
+  for (auto& [k, e] : od_)
+    if ((k >> 8) >= 0x1000 && (k >> 8) < 0x2000) e = od_defaults_.at(k);
+  nmt_ = co::NmtState::kPreOperational;
+  syncs_ = 0;
+  rx_latched_ = false;
+  seg_upload_ = seg_download_ = false;
+  send_(co::heartbeat_frame(s_.node_id, co::NmtState::kBootUp));
+}
+
+void SimDrive::heartbeat() {
+  if (s_.faults.stop_heartbeat_at >= 0 && syncs_ >= s_.faults.stop_heartbeat_at) return;
+  send_(co::heartbeat_frame(s_.node_id, nmt_));
+}
+
+void SimDrive::tick_wall(std::int64_t now_ns) {
+  now_wall_ns_ = now_ns;
+  const auto hb_ms = read_int(0x1017, 0);
+  if (hb_ms <= 0) return;
+  // In operational with SYNC flowing the heartbeat is lockstep (on_sync); otherwise wall-clock.
+  const bool lockstep = nmt_ == co::NmtState::kOperational && now_ns - last_sync_wall_ns_ < 500000000LL;
+  if (lockstep) return;
+  if (now_ns - last_hb_ns_ >= hb_ms * 1000000LL) {
+    last_hb_ns_ = now_ns;
+    heartbeat();
+  }
+}
+
+void SimDrive::on_frame(const CanFrame& f) {
+  if (f.error || f.rtr || f.extended) return;
+  if (f.id == co::kCobNmt) {
+    if (f.dlc != 2 || (f.data[1] != 0 && f.data[1] != s_.node_id)) return;
+    switch (f.data[0]) {
+      case 0x01: nmt_ = co::NmtState::kOperational; syncs_ = 0; break;
+      case 0x02: nmt_ = co::NmtState::kStopped; break;
+      case 0x80: nmt_ = co::NmtState::kPreOperational; break;
+      case 0x81: power_on(); break;
+      case 0x82: reset_communication(); break;
+      default: break;
+    }
+    return;
+  }
+  if (nmt_ == co::NmtState::kStopped) return;
+  if (f.id == co::kCobSync) {
+    if (nmt_ == co::NmtState::kOperational) on_sync();
+    return;
+  }
+  if (f.id == co::kCobSdoRx + s_.node_id) {
+    on_sdo(f);
+    return;
+  }
+  if (f.id == co::kCobRpdo[0] + s_.node_id && nmt_ == co::NmtState::kOperational) on_rpdo(f);
+}
+
+co::PdoMapping SimDrive::mapping(bool rx) const {
+  co::PdoMapping m;
+  const std::uint16_t mi = rx ? 0x1600 : 0x1A00;
+  m.count = static_cast<std::size_t>(std::min<std::int64_t>(8, read_int(mi, 0) & 0xFF));
+  for (std::size_t k = 0; k < m.count; ++k)
+    m.entries[k] = co::PdoEntry::from_word(u32(mi, static_cast<std::uint8_t>(k + 1)));
+  return m;
+}
+
+void SimDrive::on_rpdo(const CanFrame& f) {
+  if ((u32(0x1400, 1) & 0x80000000u) != 0) return;
+  const auto m = mapping(true);
+  co::PdoValues v{};
+  if (f.dlc < m.bytes() || !co::unpack_pdo(m, f, v)) {
+    // CiA 301: a too-short RPDO is not processed; the drive reports 0x8210.
+    co::Emcy e;
+    e.code = 0x8210;
+    e.error_register = 0x10;
+    send_(co::emcy_frame(s_.node_id, e));
+    return;
+  }
+  for (std::size_t k = 0; k < m.count; ++k) {
+    const auto idx = m.entries[k].index;
+    if (idx == 0x6040) rx_cw_ = static_cast<std::uint16_t>(v[k]);
+    else if (idx == 0x60FF || idx == 0x607A) rx_target_ = co::as_i32(v[k]);
+    else if (idx == 0x6060) set_int(0x6060, 0, static_cast<std::int8_t>(v[k] & 0xFF));
+  }
+  rx_latched_ = true;
+}
+
+void SimDrive::raise_fault(std::uint16_t code) {
+  state_ = co::Cia402State::kFaultReactionActive;
+  set_int(0x603F, 0, code);
+  set_int(0x1001, 0, 0x03);  // generic + current
+  co::Emcy e;
+  e.code = code;
+  e.error_register = 0x03;
+  send_(co::emcy_frame(s_.node_id, e));
+}
+
+void SimDrive::on_sync() {
+  ++syncs_;
+  last_sync_wall_ns_ = now_wall_ns_;
+  const auto& fl = s_.faults;
+  // 1. sample and transmit (values of the state reached at the previous SYNC)
+  const std::int64_t pos_counts =
+      s_.spindle ? std::llround(spindle_rev_ * s_.counts_per_mm)
+                 : std::llround(plant_.position_mm() * s_.counts_per_mm);
+  set_int(0x6064, 0, static_cast<std::int32_t>(static_cast<std::uint32_t>(pos_counts & 0xFFFFFFFF)));
+  set_int(0x606C, 0, s_.spindle ? std::llround(spindle_rpm_)
+                                : std::llround(plant_.velocity_mm_s() * s_.counts_per_mm));
+  std::uint16_t sw = co::statusword_for(state_);
+  if (state_ == co::Cia402State::kOperationEnabled) sw |= 0x1000;  // follows the command
+  set_int(0x6041, 0, sw);
+  const auto tx_type = read_int(0x1800, 2) & 0xFF;
+  const bool tx_valid = (u32(0x1800, 1) & 0x80000000u) == 0;
+  const bool dropping = fl.drop_tpdo_from >= 0 && syncs_ >= fl.drop_tpdo_from &&
+                        (fl.drop_tpdo_count == 0 || syncs_ < fl.drop_tpdo_from + fl.drop_tpdo_count);
+  if (tx_valid && tx_type >= 1 && tx_type <= 240 && syncs_ % tx_type == 0 && !dropping) {
+    const auto m = mapping(false);
+    co::PdoValues v{};
+    for (std::size_t k = 0; k < m.count; ++k) v[k] = read_int(m.entries[k].index, m.entries[k].sub);
+    CanFrame f;
+    f.id = u32(0x1800, 1) & 0x7FF;
+    co::pack_pdo(m, v, f);
+    send_(f);
+  }
+  if (fl.malformed_at >= 0 && syncs_ == fl.malformed_at) {
+    CanFrame f;
+    f.id = co::kCobTpdo[0] + s_.node_id;  // TPDO shorter than its mapping
+    f.dlc = 1;
+    send_(f);
+    f.id = co::kCobEmcy + s_.node_id;  // EMCY must be 8 bytes
+    f.dlc = 3;
+    send_(f);
+    f.id = co::kCobHeartbeat + s_.node_id;  // heartbeat must be 1 byte
+    f.dlc = 2;
+    send_(f);
+    f.id = co::kCobSdoTx + s_.node_id;  // SDO response nobody asked for
+    f.dlc = 8;
+    send_(f);
+    f.id = 0x7E5;  // LSS, not used by this master
+    f.dlc = 8;
+    send_(f);
+  }
+  // 2. lockstep heartbeat
+  const auto hb_ms = read_int(0x1017, 0);
+  if (hb_ms > 0) {
+    const long every = std::max<long>(1, std::lround(static_cast<double>(hb_ms) * 1e-3 / s_.period_s));
+    if (syncs_ % every == 0) heartbeat();
+  }
+  // 3. apply the RPDO latched since the previous SYNC
+  if (fl.fault_at >= 0 && syncs_ == fl.fault_at && state_ != co::Cia402State::kFault) raise_fault(fl.fault_code);
+  const std::uint16_t cw = rx_latched_ ? rx_cw_ : cw_;
+  prev_cw_ = cw_;
+  cw_ = cw;
+  rx_latched_ = false;
+  set_int(0x6040, 0, cw);
+  const double T = s_.period_s;
+  const double decel_mm_s2 = static_cast<double>(u32(0x6085, 0)) / s_.counts_per_mm;
+  const bool ramping = state_ == co::Cia402State::kQuickStopActive ||
+                       state_ == co::Cia402State::kFaultReactionActive;
+  const bool ramp_done = ramping && std::abs(v_cmd_mm_s_) < 1e-12;
+  const auto before = state_;
+  state_ = co::drive_transition(state_, cw, prev_cw_, static_cast<int>(read_int(0x605A, 0)), ramp_done);
+  if (before == co::Cia402State::kFault && state_ != co::Cia402State::kFault) {
+    set_int(0x603F, 0, 0);
+    set_int(0x1001, 0, 0);
+    send_(co::emcy_frame(s_.node_id, co::Emcy{}));  // error reset
+  }
+  // 4. step the plant one period
+  const std::int8_t mode = static_cast<std::int8_t>(read_int(0x6061, 0));
+  if (s_.spindle) {
+    double target = state_ == co::Cia402State::kOperationEnabled ? static_cast<double>(rx_target_) : 0.0;
+    if (state_ != co::Cia402State::kOperationEnabled) target = 0.0;
+    const double a = std::exp(-T / std::max(1e-6, s_.spindle_tau_s));
+    spindle_rpm_ = a * spindle_rpm_ + (1.0 - a) * target;
+    spindle_rev_ += spindle_rpm_ / 60.0 * T;
+    return;
+  }
+  switch (state_) {
+    case co::Cia402State::kOperationEnabled:
+      if (mode == 8) {
+        // CSP: the drive closes its own position loop; the plant command is the position error.
+        plant_.step(static_cast<double>(rx_target_) / s_.counts_per_mm - plant_.measured_mm());
+        v_cmd_mm_s_ = plant_.velocity_mm_s();
+      } else {
+        v_cmd_mm_s_ = static_cast<double>(rx_target_) / s_.counts_per_mm;
+        plant_.step_velocity(v_cmd_mm_s_);
+      }
+      break;
+    case co::Cia402State::kQuickStopActive:
+    case co::Cia402State::kFaultReactionActive: {
+      if (before != co::Cia402State::kQuickStopActive && before != co::Cia402State::kFaultReactionActive)
+        v_cmd_mm_s_ = plant_.velocity_mm_s();
+      const double dv = decel_mm_s2 * T;
+      v_cmd_mm_s_ = std::abs(v_cmd_mm_s_) <= dv ? 0.0 : v_cmd_mm_s_ - std::copysign(dv, v_cmd_mm_s_);
+      plant_.step_velocity(v_cmd_mm_s_);
+      break;
+    }
+    default:
+      v_cmd_mm_s_ = 0.0;
+      plant_.step(0.0);  // velocity loop holds zero speed (brake)
+      break;
+  }
+}
+
+// ------------------------------------------------------------------ SDO server
+void SimDrive::send_sdo(std::uint8_t cs, std::uint16_t index, std::uint8_t sub,
+                        const std::uint8_t* d, std::size_t n) {
+  CanFrame f;
+  f.id = co::kCobSdoTx + s_.node_id;
+  f.dlc = 8;
+  f.data[0] = cs;
+  co::put_u16(&f.data[1], index);
+  f.data[3] = sub;
+  for (std::size_t i = 0; i < n && i < 4; ++i) f.data[4 + i] = d[i];
+  send_(f);
+}
+
+void SimDrive::abort(std::uint16_t index, std::uint8_t sub, std::uint32_t code) {
+  seg_upload_ = seg_download_ = false;
+  send_(co::sdo_abort_frame(s_.node_id, true, index, sub, code));
+}
+
+bool SimDrive::pdo_mapping_ok(bool rx, std::uint8_t count, std::uint16_t map_index,
+                              std::uint32_t& code) const {
+  int bits = 0;
+  for (std::uint8_t k = 1; k <= count; ++k) {
+    const auto e = co::PdoEntry::from_word(u32(map_index, k));
+    if (!(rx ? rx_mappable(e.index) : tx_mappable(e.index)) || e.sub != 0) {
+      code = od_.count(key(e.index, e.sub)) != 0 ? 0x06040041 : 0x06020000;
+      return false;
+    }
+    const auto it = od_.find(key(e.index, e.sub));
+    if (static_cast<std::size_t>(e.bits) != 8 * it->second.value.size()) {
+      code = 0x06040043;
+      return false;
+    }
+    bits += e.bits;
+  }
+  if (bits > 64) {
+    code = 0x06040042;
+    return false;
+  }
+  return true;
+}
+
+std::optional<std::uint32_t> SimDrive::write_object(std::uint16_t index, std::uint8_t sub,
+                                                    const std::vector<std::uint8_t>& data) {
+  Entry* e = find(index, sub);
+  if (e == nullptr) {
+    bool any = false;
+    for (const auto& [k, v] : od_)
+      if ((k >> 8) == index) any = true;
+    return any ? 0x06090011u : 0x06020000u;
+  }
+  if (!e->writable) return 0x06010002u;
+  if (data.size() != e->value.size()) return data.size() > e->value.size() ? 0x06070012u : 0x06070013u;
+  std::uint32_t v = 0;
+  for (std::size_t i = 0; i < data.size() && i < 4; ++i) v |= static_cast<std::uint32_t>(data[i]) << (8 * i);
+  const bool is_comm = (index >= 0x1400 && index <= 0x1403) || (index >= 0x1800 && index <= 0x1803);
+  const bool is_map = (index >= 0x1600 && index <= 0x1603) || (index >= 0x1A00 && index <= 0x1A03);
+  if (is_comm && sub == 1) {
+    const std::uint32_t cur = u32(index, 1);
+    const bool cur_valid = (cur & 0x80000000u) == 0, new_valid = (v & 0x80000000u) == 0;
+    // CiA 301: the COB-ID may only change while the PDO is invalid.
+    if (cur_valid && new_valid && (cur & 0x7FF) != (v & 0x7FF)) return 0x06090030u;
+    if ((v & 0x7FF) == 0 || (v & 0x20000000u) != 0) return 0x06090030u;
+  }
+  if (is_comm && sub == 2 && !(v <= 240 || v >= 254)) return 0x06090030u;
+  if (is_map) {
+    const std::uint16_t comm = static_cast<std::uint16_t>(index - 0x200);
+    if ((u32(comm, 1) & 0x80000000u) == 0) return 0x08000022u;  // PDO still valid
+    if (sub == 0) {
+      if (v > 8) return 0x06090031u;
+      std::uint32_t code = 0;
+      if (v > 0 && !pdo_mapping_ok(index < 0x1A00, static_cast<std::uint8_t>(v), index, code)) return code;
+    } else if ((read_int(index, 0) & 0xFF) != 0) {
+      return 0x08000022u;  // entries change only while sub 0 is 0
+    }
+  }
+  if (index == 0x6060) {
+    const auto m = static_cast<std::int8_t>(v & 0xFF);
+    const bool ok = s_.spindle ? (m == 3 || m == 9) : (m == 8 || m == 9);
+    if (!ok) return 0x06090030u;
+    if (state_ == co::Cia402State::kOperationEnabled) return 0x08000022u;
+  }
+  if (index == 0x605A && static_cast<std::int16_t>(v & 0xFFFF) > 8) return 0x06090030u;
+  e->value = data;
+  if (index == 0x6060) set_int(0x6061, 0, static_cast<std::int8_t>(v & 0xFF));
+  return std::nullopt;
+}
+
+void SimDrive::on_sdo(const CanFrame& f) {
+  if (f.dlc != 8) return;  // not an SDO request; ignored (the client times out)
+  const std::uint8_t cs = f.data[0];
+  const std::uint8_t ccs = cs >> 5;
+  const std::uint16_t index = co::get_u16(&f.data[1]);
+  const std::uint8_t sub = f.data[3];
+  if (cs == 0x80) {  // abort from the client
+    seg_upload_ = seg_download_ = false;
+    return;
+  }
+  // Segment traffic first (no multiplexer in these frames).
+  if (ccs == 3 && seg_upload_) {
+    if (((cs & 0x10) != 0) != seg_toggle_) return abort(seg_index_, seg_sub_, 0x05030000);
+    const std::size_t n = std::min<std::size_t>(7, seg_buf_.size() - seg_pos_);
+    const bool last = seg_pos_ + n >= seg_buf_.size();
+    CanFrame r;
+    r.id = co::kCobSdoTx + s_.node_id;
+    r.dlc = 8;
+    r.data[0] = static_cast<std::uint8_t>((seg_toggle_ ? 0x10 : 0) | ((7 - n) << 1) | (last ? 1 : 0));
+    for (std::size_t i = 0; i < n; ++i) r.data[1 + i] = seg_buf_[seg_pos_ + i];
+    seg_pos_ += n;
+    seg_toggle_ = !seg_toggle_;
+    if (last) seg_upload_ = false;
+    send_(r);
+    return;
+  }
+  if (ccs == 0 && seg_download_) {
+    if (((cs & 0x10) != 0) != seg_toggle_) return abort(seg_index_, seg_sub_, 0x05030000);
+    const std::size_t n = 7u - ((cs >> 1) & 7u);
+    seg_buf_.insert(seg_buf_.end(), f.data.begin() + 1, f.data.begin() + 1 + static_cast<std::ptrdiff_t>(n));
+    CanFrame r;
+    r.id = co::kCobSdoTx + s_.node_id;
+    r.dlc = 8;
+    r.data[0] = static_cast<std::uint8_t>(0x20 | (seg_toggle_ ? 0x10 : 0));
+    seg_toggle_ = !seg_toggle_;
+    if ((cs & 1) != 0) {
+      seg_download_ = false;
+      if (seg_buf_.size() != seg_size_) return abort(seg_index_, seg_sub_, 0x06070010);
+      if (auto err = write_object(seg_index_, seg_sub_, seg_buf_)) return abort(seg_index_, seg_sub_, *err);
+    }
+    send_(r);
+    return;
+  }
+  if (s_.faults.sdo_abort_object && *s_.faults.sdo_abort_object == key(index, sub) &&
+      (ccs == 1 || ccs == 2))
+    return abort(index, sub, s_.faults.sdo_abort_code);
+  if (ccs == 2) {  // initiate upload
+    Entry* e = find(index, sub);
+    if (e == nullptr) {
+      bool any = false;
+      for (const auto& [k, v] : od_)
+        if ((k >> 8) == index) any = true;
+      return abort(index, sub, any ? 0x06090011 : 0x06020000);
+    }
+    if (!e->readable) return abort(index, sub, 0x06010001);
+    if (e->value.size() <= 4 && !e->value.empty()) {
+      const auto n = e->value.size();
+      send_sdo(static_cast<std::uint8_t>(0x43 | ((4 - n) << 2)), index, sub, e->value.data(), n);
+    } else {
+      seg_buf_ = e->value;
+      seg_pos_ = 0;
+      seg_toggle_ = false;
+      seg_upload_ = true;
+      seg_index_ = index;
+      seg_sub_ = sub;
+      std::uint8_t sz[4];
+      co::put_u32(sz, static_cast<std::uint32_t>(seg_buf_.size()));
+      send_sdo(0x41, index, sub, sz, 4);
+    }
+    return;
+  }
+  if (ccs == 1) {  // initiate download
+    const bool expedited = (cs & 0x02) != 0, size_ind = (cs & 0x01) != 0;
+    if (expedited) {
+      const std::size_t n = size_ind ? 4u - ((cs >> 2) & 3u) : 4u;
+      std::vector<std::uint8_t> d(f.data.begin() + 4, f.data.begin() + 4 + static_cast<std::ptrdiff_t>(n));
+      if (auto err = write_object(index, sub, d)) return abort(index, sub, *err);
+      send_sdo(0x60, index, sub, nullptr, 0);
+      return;
+    }
+    Entry* e = find(index, sub);
+    if (e == nullptr) return abort(index, sub, 0x06020000);
+    if (!e->writable) return abort(index, sub, 0x06010002);
+    seg_buf_.clear();
+    seg_size_ = size_ind ? co::get_u32(&f.data[4]) : 0;
+    seg_download_ = true;
+    seg_toggle_ = false;
+    seg_index_ = index;
+    seg_sub_ = sub;
+    send_sdo(0x60, index, sub, nullptr, 0);
+    return;
+  }
+  abort(index, sub, 0x05040001);
+}
+
+}  // namespace contour::sim

@@ -1,0 +1,118 @@
+#pragma once
+// One simulated CiA 402 drive node for contour-machine-sim: object dictionary + SDO server,
+// NMT slave, heartbeat producer, PDO mapping as configured by the master, CiA 402 power state
+// machine with quick stop and fault reset, and the plant: control::FeedDrive (the ONE plant
+// model) for an axis, a first-order speed lag for the spindle.
+//
+// Lockstep: the plant advances exactly one period per SYNC received. At SYNC n the drive first
+// samples and sends its TPDO (statusword, position of step n), then applies the RPDO latched
+// since SYNC n-1 and steps the plant. The CAN transport therefore contributes one period of
+// command delay; the FeedDrive inside gets (configured delay_cycles - 1) so that the whole loop
+// has the configured delay, as contour-sim's in-process drive does.
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "control/feed_drive.hpp"
+#include "drivers/can/can_bus.hpp"
+#include "drivers/canopen/codec.hpp"
+
+namespace contour::sim {
+
+struct SimFaults {
+  long drop_tpdo_from = -1;   // SYNC count (since NMT start) from which TPDOs are dropped
+  long drop_tpdo_count = 0;   // 0 = forever
+  long fault_at = -1;         // raise a drive fault (EMCY + statusword) at this SYNC count
+  std::uint16_t fault_code = 0x2310;
+  long stop_heartbeat_at = -1;
+  std::optional<std::uint32_t> sdo_abort_object;  // index << 8 | sub
+  std::uint32_t sdo_abort_code = 0x06090030;
+  long malformed_at = -1;  // send a burst of malformed frames at this SYNC count
+};
+
+struct SimDriveSetup {
+  std::uint8_t node_id = 1;
+  std::string name = "X";
+  bool spindle = false;
+  double counts_per_mm = 2000.0;       // axis scaling (spindle: counts per revolution)
+  control::FeedDriveParams plant{};   // axis plant (delay already reduced by the CAN period)
+  double spindle_tau_s = 0.2;
+  double period_s = 0.001;
+  std::uint32_t vendor_id = 0x00000C7D;
+  std::uint32_t product_code = 402;
+  std::uint32_t revision = 0x00010000;
+  std::uint32_t serial = 0;
+  SimFaults faults;
+};
+
+class SimDrive {
+ public:
+  using Send = std::function<void(const drivers::CanFrame&)>;
+  SimDrive(SimDriveSetup setup, Send send);
+
+  void power_on();  // sends the boot-up, enters pre-operational
+  void on_frame(const drivers::CanFrame& f);
+  // Wall-clock tick for the heartbeat producer outside lockstep (pre-operational, or no SYNC).
+  void tick_wall(std::int64_t now_ns);
+
+  [[nodiscard]] std::uint8_t node_id() const { return s_.node_id; }
+  [[nodiscard]] drivers::canopen::Cia402State state() const { return state_; }
+  [[nodiscard]] drivers::canopen::NmtState nmt() const { return nmt_; }
+  [[nodiscard]] double position_mm() const { return plant_.position_mm(); }
+  [[nodiscard]] long syncs() const { return syncs_; }
+
+ private:
+  struct Entry {
+    std::vector<std::uint8_t> value;
+    bool writable = false;
+    bool readable = true;
+  };
+  void build_od();
+  void reset_communication();
+  void on_sync();
+  void on_sdo(const drivers::CanFrame& f);
+  void on_rpdo(const drivers::CanFrame& f);
+  std::optional<std::uint32_t> write_object(std::uint16_t index, std::uint8_t sub,
+                                            const std::vector<std::uint8_t>& data);
+  std::uint32_t u32(std::uint16_t index, std::uint8_t sub) const;
+  std::int64_t read_int(std::uint16_t index, std::uint8_t sub) const;
+  void set_int(std::uint16_t index, std::uint8_t sub, std::int64_t v);
+  Entry* find(std::uint16_t index, std::uint8_t sub);
+  bool pdo_mapping_ok(bool rx, std::uint8_t count, std::uint16_t map_index, std::uint32_t& abort) const;
+  drivers::canopen::PdoMapping mapping(bool rx) const;
+  void send_sdo(std::uint8_t cs, std::uint16_t index, std::uint8_t sub, const std::uint8_t* d, std::size_t n);
+  void abort(std::uint16_t index, std::uint8_t sub, std::uint32_t code);
+  void raise_fault(std::uint16_t code);
+  void heartbeat();
+
+  SimDriveSetup s_;
+  Send send_;
+  std::map<std::uint32_t, Entry> od_;
+  std::map<std::uint32_t, Entry> od_defaults_;
+  drivers::canopen::NmtState nmt_ = drivers::canopen::NmtState::kBootUp;
+  drivers::canopen::Cia402State state_ = drivers::canopen::Cia402State::kNotReadyToSwitchOn;
+  control::FeedDrive plant_;
+  double spindle_rpm_ = 0.0, spindle_rev_ = 0.0;
+  double v_cmd_mm_s_ = 0.0;  // velocity command actually applied (ramps in quick stop)
+  std::uint16_t cw_ = 0, prev_cw_ = 0;
+  std::int32_t rx_target_ = 0;
+  bool rx_latched_ = false;
+  std::uint16_t rx_cw_ = 0;
+  long syncs_ = 0;
+  std::int64_t last_hb_ns_ = 0;
+  std::int64_t last_sync_wall_ns_ = 0;
+  std::int64_t now_wall_ns_ = 0;
+  // Segmented transfers (one at a time per node, as CiA 301 allows).
+  std::vector<std::uint8_t> seg_buf_;
+  std::size_t seg_pos_ = 0;
+  bool seg_toggle_ = false;
+  bool seg_upload_ = false, seg_download_ = false;
+  std::uint16_t seg_index_ = 0;
+  std::uint8_t seg_sub_ = 0;
+  std::uint32_t seg_size_ = 0;
+};
+
+}  // namespace contour::sim
