@@ -10,8 +10,28 @@ Config parse_root(const YAML::Node& root, const std::string& name) {
   {
     Section top(root, "", diag);
     if (!top.present()) diag.error(root, "", "empty configuration");
+    {
+      Section sec = top.child("loop");
+      cfg.loop = parse_loop(sec);
+    }
     Section machine = top.child("machine");
-    cfg.machine = parse_machine(machine);
+    cfg.machine = parse_machine(machine, cfg.loop.period_us * 1e-6);
+    {
+      Section sec = top.child("safety");
+      cfg.safety = parse_safety(sec);
+    }
+    {
+      Section sec = top.child("telemetry");
+      cfg.telemetry = parse_telemetry(sec);
+    }
+    {
+      Section sec = top.child("socket");
+      cfg.socket = parse_socket(sec);
+    }
+    {
+      Section sec = top.child("log");
+      cfg.log = parse_log(sec);
+    }
     {
       Section sec = top.child("interpolator");
       cfg.interpolator = parse_interpolator(sec);

@@ -5,6 +5,7 @@
 
 #include "config/bus_config.hpp"
 #include "config/control_config.hpp"
+#include "config/daemon_config.hpp"
 #include "config/dynamometer_config.hpp"
 #include "config/force_config.hpp"
 #include "config/gpio_config.hpp"
@@ -19,6 +20,11 @@ namespace contour::config {
 struct Config {
   std::string source;  // file name (or "<string>")
   MachineConfig machine;
+  LoopConfig loop;
+  SafetyConfig safety;
+  TelemetryConfig telemetry;
+  SocketConfig socket;
+  LogConfig log;
   InterpolatorConfig interpolator;
   ProgramConfig program;
   ControlConfig control;

@@ -2,12 +2,27 @@
 
 namespace contour::config {
 
-MachineConfig parse_machine(Section& s) {
+MachineConfig parse_machine(Section& s, double period_s) {
   MachineConfig m;
-  m.period_s = s.number("period_ms", 1.0, 0.125, 20.0) / 1000.0;
+  m.period_s = period_s;
+  const char* default_names[] = {"X", "Y", "Z"};
+  if (!s.present()) {
+    // No machine section: the seed-000 Table 1 machine (X, Y, Z with the simulated drives'
+    // defaults), so tools that only need another section still run on a sane machine.
+    for (int i = 0; i < 3; ++i) {
+      AxisConfig ax;
+      ax.name = default_names[i];
+      ax.drive.gain_per_s = i == 2 ? 115.0 : 120.0;
+      ax.drive.tau_s = i == 2 ? 0.025 : 0.030;
+      ax.drive.blu_mm = 0.0005;
+      ax.drive.delay_cycles = 1;
+      ax.drive.period_s = period_s;
+      m.axes.push_back(ax);
+    }
+    return m;
+  }
   auto axes = s.list("axes");
   if (axes.empty() || axes.size() > 3) s.error("axes", "expected a list of 1 to 3 axes");
-  const char* default_names[] = {"X", "Y", "Z"};
   for (std::size_t i = 0; i < axes.size(); ++i) {
     Section& a = axes[i];
     AxisConfig ax;

@@ -22,9 +22,10 @@ struct AxisConfig {
 
 struct MachineConfig {
   std::vector<AxisConfig> axes;  // 1..3 linear axes, X Y Z order
-  double period_s = 0.001;       // interpolation/servo period (mirrors loop.period_us)
+  double period_s = 0.001;       // servo/interpolation period: copied from loop.period_us
 };
 
-MachineConfig parse_machine(Section& s);
+// period_s comes from loop.period_us (one source of truth for the cycle time).
+MachineConfig parse_machine(Section& s, double period_s);
 
 }  // namespace contour::config

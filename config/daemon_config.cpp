@@ -1,0 +1,76 @@
+#include "config/daemon_config.hpp"
+
+namespace contour::config {
+
+LoopConfig parse_loop(Section& s) {
+  LoopConfig c;
+  c.period_us = static_cast<int>(s.integer("period_us", 1000, 125, 20000));
+  c.priority = static_cast<int>(s.integer("priority", 80, 0, 99));
+  c.cpu = static_cast<int>(s.integer("cpu", -1, -1, 1023));
+  c.require_realtime = s.boolean("require_realtime", false);
+  c.lock_memory = s.boolean("lock_memory", true);
+  c.tpdo_deadline_us = static_cast<int>(s.integer("tpdo_deadline_us", 750, 50, 20000));
+  if (c.tpdo_deadline_us >= c.period_us) {
+    s.error("tpdo_deadline_us", "must be shorter than period_us");
+  }
+  return c;
+}
+
+SafetyConfig parse_safety(Section& s) {
+  SafetyConfig c;
+  c.ferror_mm = s.number("ferror_mm", 1.0, 1e-4, 100.0);
+  c.min_ferror_mm = s.number("min_ferror_mm", 0.1, 1e-4, 100.0);
+  if (c.min_ferror_mm > c.ferror_mm) s.error("min_ferror_mm", "must not exceed ferror_mm");
+  c.contour_error_limit_mm = s.number("contour_error_limit_mm", 0.5, 1e-4, 100.0);
+  c.missed_tpdo_streak = static_cast<int>(s.integer("missed_tpdo_streak", 3, 1, 1000));
+  c.stop_decel_mm_s2 = s.number("stop_decel_mm_s2", 1000.0, 1.0, 1e6);
+  c.jog_max_velocity_mm_min = s.number("jog_max_velocity_mm_min", 3000.0, 1.0, 1e6);
+  return c;
+}
+
+TelemetryConfig parse_telemetry(Section& s) {
+  TelemetryConfig c;
+  c.directory = s.string("directory", c.directory);
+  c.decimation = static_cast<int>(s.integer("decimation", 1, 1, 10000));
+  c.ring_capacity = static_cast<int>(s.integer("ring_capacity", 65536, 64, 1 << 24));
+  if ((c.ring_capacity & (c.ring_capacity - 1)) != 0) {
+    s.error("ring_capacity", "must be a power of two");
+  }
+  return c;
+}
+
+SocketConfig parse_socket(Section& s) {
+  SocketConfig c;
+  c.path = s.string("path", c.path);
+  if (c.path.empty() || c.path.size() > 107) s.error("path", "must be 1..107 characters");
+  if (s.has("mode")) {
+    // Accept "0660" (octal string) or a number written in octal digits (660 / 0660).
+    const std::string m = s.string("mode", "0660");
+    int v = 0;
+    bool ok = !m.empty() && m.size() <= 4;
+    for (char ch : m) {
+      if (ch < '0' || ch > '7') ok = false;
+      v = v * 8 + (ch - '0');
+    }
+    if (!ok) {
+      s.error("mode", "expected an octal permission like \"0660\"");
+    } else if ((v & 0007) != 0) {
+      s.error("mode", "must not give 'other' any access (the socket controls the machine)");
+    } else {
+      c.mode = v;
+    }
+  }
+  c.group = s.string("group", "");
+  c.max_clients = static_cast<int>(s.integer("max_clients", 16, 1, 1024));
+  c.max_line_bytes = static_cast<int>(s.integer("max_line_bytes", 65536, 256, 16 << 20));
+  return c;
+}
+
+LogConfig parse_log(Section& s) {
+  LogConfig c;
+  c.level = s.choice("level", "info", {"trace", "debug", "info", "warn", "error"});
+  c.journald_format = s.boolean("journald_format", false);
+  return c;
+}
+
+}  // namespace contour::config

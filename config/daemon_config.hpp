@@ -1,0 +1,54 @@
+#pragma once
+// Sections read by the daemon itself: `loop:`, `safety:`, `telemetry:`, `socket:`, `log:`.
+#include <string>
+
+#include "config/yaml_reader.hpp"
+
+namespace contour::config {
+
+struct LoopConfig {
+  int period_us = 1000;          // servo period (also the interpolation period)
+  int priority = 80;             // SCHED_FIFO priority
+  int cpu = -1;                  // CPU affinity of the RT thread; -1 = none
+  bool require_realtime = false; // refuse to start when SCHED_FIFO / mlockall are not permitted
+  bool lock_memory = true;
+  int tpdo_deadline_us = 750;    // receive deadline for TPDOs inside the cycle
+};
+
+struct SafetyConfig {
+  // Following-error band like LinuxCNC's MIN_FERROR/FERROR: allowed error grows linearly with speed
+  // from min_ferror_mm at standstill to ferror_mm at max_velocity.
+  double ferror_mm = 1.0;
+  double min_ferror_mm = 0.1;
+  double contour_error_limit_mm = 0.5;
+  int missed_tpdo_streak = 3;          // consecutive missed TPDOs of one node -> FAULT
+  double stop_decel_mm_s2 = 1000.0;    // controlled-stop deceleration along the path
+  double jog_max_velocity_mm_min = 3000.0;
+};
+
+struct TelemetryConfig {
+  std::string directory = "/var/lib/contourd/records";
+  int decimation = 1;              // one sample every N cycles
+  int ring_capacity = 65536;       // samples (power of two)
+};
+
+struct SocketConfig {
+  std::string path = "/run/contourd/contourd.sock";
+  int mode = 0660;                 // octal in YAML as a string "0660" or number 432
+  std::string group;
+  int max_clients = 16;
+  int max_line_bytes = 65536;
+};
+
+struct LogConfig {
+  std::string level = "info";      // trace|debug|info|warn|error
+  bool journald_format = false;    // no timestamps/colour, level as syslog prefix <N>
+};
+
+LoopConfig parse_loop(Section& s);
+SafetyConfig parse_safety(Section& s);
+TelemetryConfig parse_telemetry(Section& s);
+SocketConfig parse_socket(Section& s);
+LogConfig parse_log(Section& s);
+
+}  // namespace contour::config

@@ -1,0 +1,183 @@
+#include "daemon/command_server.hpp"
+
+#include <gtest/gtest.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <random>
+#include <string>
+
+using contour::daemon::ClientInfo;
+using contour::daemon::CommandError;
+using contour::daemon::CommandServer;
+using contour::daemon::CommandServerOptions;
+using nlohmann::json;
+
+namespace {
+
+std::string temp_socket_path() {
+  return "/tmp/contourd-test-" + std::to_string(::getpid()) + "-" +
+         std::to_string(std::random_device{}() % 100000) + ".sock";
+}
+
+int connect_to(const std::string& path) {
+  int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  sockaddr_un a{};
+  a.sun_family = AF_UNIX;
+  std::strncpy(a.sun_path, path.c_str(), sizeof(a.sun_path) - 1);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+void send_all(int fd, const std::string& s) {
+  std::size_t off = 0;
+  while (off < s.size()) {
+    const ssize_t n = ::send(fd, s.data() + off, s.size() - off, MSG_NOSIGNAL);
+    if (n <= 0) return;
+    off += static_cast<std::size_t>(n);
+  }
+}
+
+// Reads one line (up to 5 s).
+std::string read_line(int fd) {
+  std::string out;
+  char ch = 0;
+  for (;;) {
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, 5000) != 1) return out + "<timeout>";
+    if (::read(fd, &ch, 1) != 1) return out + "<eof>";
+    if (ch == '\n') return out;
+    out.push_back(ch);
+  }
+}
+
+class CommandServerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    opt_.path = temp_socket_path();
+    opt_.max_line_bytes = 1024;
+    server_ = std::make_unique<CommandServer>(opt_, [this](const json& req, const ClientInfo& c) {
+      const std::string cmd = req.at("cmd").get<std::string>();
+      if (cmd == "echo") return json{{"value", req.at("value")}};
+      if (cmd == "whoami") return json{{"client", c.id}};
+      if (cmd == "sub") {
+        server_->subscribe(c.id, "telemetry");
+        return json::object();
+      }
+      throw CommandError("unknown command '" + cmd + "'");
+    });
+    server_->start();
+  }
+  void TearDown() override { server_->stop(); }
+
+  CommandServerOptions opt_;
+  std::unique_ptr<CommandServer> server_;
+};
+
+}  // namespace
+
+TEST_F(CommandServerTest, SocketIsGroupWritableNotWorldWritable) {
+  struct stat st{};
+  ASSERT_EQ(::stat(opt_.path.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISSOCK(st.st_mode));
+  EXPECT_EQ(st.st_mode & 0777, 0660u);
+}
+
+TEST_F(CommandServerTest, EchoesIdAndResult) {
+  int fd = connect_to(opt_.path);
+  ASSERT_GE(fd, 0);
+  send_all(fd, R"({"id": 7, "cmd": "echo", "value": [1, 2]})" "\n");
+  json r = json::parse(read_line(fd));
+  EXPECT_EQ(r["id"], 7);
+  EXPECT_EQ(r["ok"], true);
+  EXPECT_EQ(r["result"]["value"], json({1, 2}));
+  ::close(fd);
+}
+
+TEST_F(CommandServerTest, BadRequestsGetErrorsAndServerKeepsServing) {
+  int fd = connect_to(opt_.path);
+  ASSERT_GE(fd, 0);
+  const char* bad[] = {"{not json", "[1,2]", R"({"id":1})", R"({"id":2,"cmd":5})",
+                       R"({"id":3,"cmd":"nope"})", R"({"id":4,"cmd":"echo"})"};
+  const char* expect[] = {"malformed JSON", "must be a JSON object", "missing string field 'cmd'",
+                          "missing string field 'cmd'", "unknown command 'nope'", "bad argument"};
+  for (std::size_t i = 0; i < std::size(bad); ++i) {
+    send_all(fd, std::string(bad[i]) + "\n");
+    json r = json::parse(read_line(fd));
+    EXPECT_EQ(r["ok"], false) << bad[i];
+    EXPECT_NE(r["error"].get<std::string>().find(expect[i]), std::string::npos)
+        << bad[i] << " -> " << r.dump();
+  }
+  send_all(fd, std::string(5000, 'x') + "\n");
+  json r = json::parse(read_line(fd));
+  EXPECT_NE(r["error"].get<std::string>().find("longer than 1024"), std::string::npos);
+  send_all(fd, R"({"id":9,"cmd":"echo","value":1})" "\n");
+  r = json::parse(read_line(fd));
+  EXPECT_EQ(r["ok"], true);
+  EXPECT_EQ(r["id"], 9);
+  ::close(fd);
+}
+
+TEST_F(CommandServerTest, RandomBytesAndRapidConnectsLeaveItServing) {
+  std::mt19937 rng(1234);
+  for (int round = 0; round < 200; ++round) {
+    int fd = connect_to(opt_.path);
+    ASSERT_GE(fd, 0) << "round " << round;
+    std::string junk(static_cast<std::size_t>(rng() % 3000), '\0');
+    for (auto& ch : junk) ch = static_cast<char>(rng() & 0xFF);
+    send_all(fd, junk);
+    ::close(fd);
+  }
+  int fd = connect_to(opt_.path);
+  ASSERT_GE(fd, 0);
+  send_all(fd, R"({"id":"last","cmd":"echo","value":"ok"})" "\n");
+  json r = json::parse(read_line(fd));
+  EXPECT_EQ(r["result"]["value"], "ok");
+  ::close(fd);
+  const auto st = server_->stats();
+  EXPECT_GT(st.connections + st.errors, 200u);  // refused ones (too many clients) count as errors
+}
+
+TEST_F(CommandServerTest, SeveralClientsAndSubscriptions) {
+  int a = connect_to(opt_.path);
+  int b = connect_to(opt_.path);
+  ASSERT_GE(a, 0);
+  ASSERT_GE(b, 0);
+  send_all(a, R"({"id":1,"cmd":"whoami"})" "\n");
+  send_all(b, R"({"id":1,"cmd":"whoami"})" "\n");
+  auto ida = json::parse(read_line(a))["result"]["client"];
+  auto idb = json::parse(read_line(b))["result"]["client"];
+  EXPECT_NE(ida, idb);
+  send_all(b, R"({"id":2,"cmd":"sub"})" "\n");
+  EXPECT_EQ(json::parse(read_line(b))["ok"], true);
+  server_->publish("telemetry", {{"event", "telemetry"}, {"t", 1.5}});
+  json ev = json::parse(read_line(b));
+  EXPECT_EQ(ev["event"], "telemetry");
+  EXPECT_EQ(ev["t"], 1.5);
+  pollfd p{a, POLLIN, 0};
+  EXPECT_EQ(::poll(&p, 1, 100), 0) << "unsubscribed client got an event";
+  ::close(a);
+  ::close(b);
+}
+
+TEST(CommandServer, SecondServerOnLiveSocketRefuses) {
+  CommandServerOptions o;
+  o.path = temp_socket_path();
+  CommandServer s1(o, [](const json&, const ClientInfo&) { return json::object(); });
+  s1.start();
+  CommandServer s2(o, [](const json&, const ClientInfo&) { return json::object(); });
+  try {
+    s2.start();
+    FAIL() << "second server started";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("already serving"), std::string::npos) << e.what();
+  }
+  s1.stop();
+}
