@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <ctime>
@@ -16,6 +17,7 @@
 
 #include "config/config.hpp"
 #include "drivers/can/socket_can.hpp"
+#include "tools/contour-machine-sim/dynamometer_server.hpp"
 #include "tools/contour-machine-sim/sim_drive.hpp"
 
 namespace {
@@ -77,9 +79,35 @@ int main(int argc, char** argv) {
     std::cerr << config_path << ": no bus nodes (machine.axes[].node_id all 0, no bus.spindle)\n";
     return 78;
   }
-  if (!modbus.empty())
-    std::cerr << "contour-machine-sim: --modbus " << modbus
-              << ": the dynamometer is not wired into contour-machine-sim yet\n";
+  // Dynamometer: served when the config enables it or --modbus names an endpoint. Its force
+  // follows the same machine: feed = the axes' resultant speed, spindle speed from the spindle
+  // node, path position = distance travelled.
+  std::unique_ptr<contour::sim::DynamometerServer> dyno;
+  if (cfg.dynamometer.enabled || !modbus.empty()) {
+    std::string host = cfg.dynamometer.reader.transport.host;
+    int port = cfg.dynamometer.reader.transport.port;
+    if (!modbus.empty()) {
+      const auto colon = modbus.rfind(':');
+      char* end = nullptr;
+      const long p = colon == std::string::npos ? -1 : std::strtol(modbus.c_str() + colon + 1, &end, 10);
+      if (colon == std::string::npos || p < 0 || p > 65535 || *end != '\0') {
+        std::cerr << "contour-machine-sim: --modbus expects HOST:PORT, got '" << modbus << "'\n";
+        return 2;
+      }
+      host = modbus.substr(0, colon);
+      port = static_cast<int>(p);
+    }
+    try {
+      dyno = std::make_unique<contour::sim::DynamometerServer>(
+          cfg.dynamometer.reader.map, contour::sim::ForceModelParams{},
+          cfg.dynamometer.reader.transport.unit_id);
+      dyno->start(host, port);
+      std::cout << "dynamometer: modbus tcp " << host << ":" << dyno->port() << std::endl;
+    } catch (const std::exception& e) {
+      std::cerr << "contour-machine-sim: dynamometer: " << e.what() << "\n";
+      return 69;
+    }
+  }
 
   std::vector<contour::sim::SimDriveSetup> setups;
   for (const auto& n : nodes) {
@@ -175,6 +203,8 @@ int main(int argc, char** argv) {
   std::cout << std::endl;
 
   contour::drivers::CanFrame f;
+  double path_mm = 0.0;
+  long last_syncs = 0;
   while (g_stop == 0) {
     bus->wait_readable(5000000);
     const std::int64_t now = mono_ns();
@@ -186,6 +216,23 @@ int main(int argc, char** argv) {
       }
     }
     for (auto& d : drives) d->tick_wall(now);
+    if (dyno) {
+      double v2 = 0.0, rpm = 0.0;
+      for (const auto& d : drives) {
+        if (d->is_spindle()) {
+          rpm = d->spindle_rpm();
+        } else {
+          v2 += d->velocity_mm_s() * d->velocity_mm_s();
+        }
+      }
+      const double v = std::sqrt(v2);
+      const long syncs = drives.empty() ? 0 : drives.front()->syncs();
+      path_mm += v * cfg.machine.period_s * static_cast<double>(syncs - last_syncs);
+      last_syncs = syncs;
+      dyno->set_feed(v * 60.0);
+      dyno->set_spindle(rpm);
+      dyno->set_path_position(path_mm);
+    }
   }
   nlohmann::json j;
   j["rx_frames"] = rx_frames;

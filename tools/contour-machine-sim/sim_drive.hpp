@@ -62,6 +62,9 @@ class SimDrive {
   [[nodiscard]] drivers::canopen::Cia402State state() const { return state_; }
   [[nodiscard]] drivers::canopen::NmtState nmt() const { return nmt_; }
   [[nodiscard]] double position_mm() const { return plant_.position_mm(); }
+  [[nodiscard]] double velocity_mm_s() const { return plant_.velocity_mm_s(); }
+  [[nodiscard]] double spindle_rpm() const { return spindle_rpm_; }
+  [[nodiscard]] bool is_spindle() const { return s_.spindle; }
   [[nodiscard]] long syncs() const { return syncs_; }
 
  private:
