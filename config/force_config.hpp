@@ -22,7 +22,7 @@
 //     override_min_pct: 0, override_max_pct: 150, override_rate_pct_s: 1000,
 //     force_ceiling_N: 3.0
 //   spindle:
-//     nominal_rpm: 3000, rpm_per_unit: 1000, min_rpm: 500, max_rpm: 6000, rate_rpm_s: 3000
+//     nominal_rpm: 3000, rpm_per_unit: 1000, min_rpm: 500, max_rpm: 6000, rate_rpm_s: 6000
 //   fallback: hold               # hold (feed hold) | programmed_feed (force control off)
 //   stale_ms: 20                 # a force sample older than this is stale
 //   bumpless_ms: 100

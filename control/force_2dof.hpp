@@ -63,10 +63,15 @@ struct ForcePlantParams {
 struct ForceWeights {
   double q_force = 1.0;               // on (y1/|K_f|)^2
   double q_position = 1.0;            // on (y2/K_v)^2
-  double q_force_integral = 25.0;     // on (int e1 / |K_f|)^2: integrator zero ~ sqrt(q_fi/q_f)
+  // on (int e1 / |K_f|)^2: integrator zero ~ sqrt(q_fi/q_f) ~ 28 rad/s. Retuned from 25 (zero at
+  // 5 rad/s) for the output-disturbance bar WITH the shipped actuator limits (0-150 % override at
+  // 1000 %/s, spindle 500-6000 rpm at 6000 rpm/s): a 0.5 N force step is back within 2 % after
+  // 0.272 s (was 0.852 s); the time-optimal lower bound for those limits is 0.245 s. Stays
+  // <= 0.3 s for spindle rates 5000-12000 rpm/s and override rates 1000-2000 %/s (measured).
+  double q_force_integral = 800.0;
   double q_position_integral = 25.0;  // on (int e2 / K_v)^2
-  double r_feed = 1e-5;               // on u1^2
-  double r_spindle = 1e-5;            // on u2^2
+  double r_feed = 1e-3;               // on u1^2 (was 1e-5: lower gains, less saturation)
+  double r_spindle = 3e-4;            // on u2^2 (was 1e-5; input phase margins 67/68 deg)
   double observer_input_noise = 3e3;  // process noise entering through B (loop transfer recovery)
   double observer_state_noise = 1e-6; // small noise on every state (keeps the DARE regular)
   double observer_measurement_noise = 1e-6;  // on the normalised integrated error

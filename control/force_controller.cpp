@@ -220,6 +220,36 @@ struct Noise {
     return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
   }
 };
+// See ForceMetrics::disturbance_recovery_bound_s. Starts from the steady state at the reference
+// with the applied inputs (u1, n) and drives both inputs towards less (d > 0) or more force.
+double recovery_bound_s(const ForcePlantParams& p, const ForceLimits& l, double period_s,
+                        double u1, double n_rpm, double xf, double xs, double d, double ref) {
+  const double band = 0.02 * std::abs(ref);
+  const double err0 = xf + xs + d - ref;
+  if (std::abs(err0) <= band) return 0.0;
+  const double sgn = err0 > 0.0 ? -1.0 : 1.0;  // direction of the wanted force change
+  const double af = std::exp(-period_s / p.tau_f_s), as = std::exp(-period_s / p.tau_s_s);
+  const double sig = p.spindle_pole == SpindlePole::kPrinted ? -1.0 : 1.0;
+  // Printed reading: the spindle term is unstable; its impulse response keeps the sign of
+  // -K_s (= K_s / sigma) for all t, so extreme inputs in that direction still give the bound.
+  const double as_eff = sig > 0.0 ? as : std::exp(period_s / p.tau_s_s);
+  const double u1_goal = sgn * p.k_f_N > 0.0 ? l.override_max : l.override_min;
+  const double n_goal = sgn * p.k_s_N * sig > 0.0 ? l.spindle_max_rpm : l.spindle_min_rpm;
+  const long kmax = std::lround(20.0 / period_s);
+  for (long k = 0; k < kmax; ++k) {
+    // Any admissible input leaves the force on the far side of this extreme trajectory, so
+    // reaching the near edge of the band is necessary (overshooting past it is allowed here).
+    const double err = xf + xs + d - ref;
+    if (sgn < 0.0 ? err <= band : err >= -band) return static_cast<double>(k) * period_s;
+    const double du1 = l.override_rate_per_s * period_s, dn = l.spindle_rate_rpm_s * period_s;
+    u1 = u1_goal > u1 ? std::min(u1_goal, u1 + du1) : std::max(u1_goal, u1 - du1);
+    n_rpm = n_goal > n_rpm ? std::min(n_goal, n_rpm + dn) : std::max(n_goal, n_rpm - dn);
+    const double u2 = (n_rpm - l.spindle_nominal_rpm) / l.spindle_rpm_per_unit;
+    xf = af * xf + (1.0 - af) * p.k_f_N * u1;
+    xs = as_eff * xs + (1.0 - as_eff) * p.k_s_N * u2;
+  }
+  return 1e9;
+}
 }  // namespace
 
 ForceMetrics run_force_scenario(const ForceDesign& d, const ForceScenario& sc, ForceTrace* trace) {
@@ -247,6 +277,8 @@ ForceMetrics run_force_scenario(const ForceDesign& d, const ForceScenario& sc, F
   double last_out = 0.0, last_rec = 0.0;
   const double f0 = sc.force_ref_N;
   bool finite = true;
+  const long dist_k = std::lround(sc.disturbance_at_s / t_step);
+  double prev_override = 0.0, prev_rpm = lim.spindle_nominal_rpm;
   if (trace) *trace = ForceTrace{};
   for (long k = 0; k < n; ++k) {
     const double t = static_cast<double>(k) * t_step;
@@ -255,6 +287,14 @@ ForceMetrics run_force_scenario(const ForceDesign& d, const ForceScenario& sc, F
     if (sc.kind == ForceScenarioKind::kImpulse && t >= sc.disturbance_at_s &&
         t < sc.disturbance_at_s + sc.pulse_s) {
       dist = sc.disturbance_N;
+    }
+    if (sc.kind == ForceScenarioKind::kStep && k == dist_k) {
+      // Bound from the state the controller has at the disturbance (steady at the reference).
+      m.disturbance_recovery_bound_s =
+          recovery_bound_s(sc.true_plant, lim, t_step, prev_override, prev_rpm,
+                           sc.true_plant.k_f_N * prev_override,
+                           plant.force_N() - sc.true_plant.k_f_N * prev_override, sc.disturbance_N,
+                           force_reference(sc, t));
     }
     const double f_true = plant.force_N(dist);
     const double f_meas = f_true + (noisy ? sc.noise_sigma_N * noise.gauss() : 0.0);
@@ -268,6 +308,8 @@ ForceMetrics run_force_scenario(const ForceDesign& d, const ForceScenario& sc, F
     in.progress_mm = prog;
     const ForceOutput out = c.step(in);
     const double fm = c.model_output()(0);
+    prev_override = out.feed_override;
+    prev_rpm = out.spindle_rpm;
     plant.step(out.feed_override, (out.spindle_rpm - lim.spindle_nominal_rpm) / lim.spindle_rpm_per_unit);
     if (!std::isfinite(f_true) || !std::isfinite(prog)) finite = false;
     se_f += (f_true - ref) * (f_true - ref);

@@ -53,7 +53,7 @@ struct ForceLimits {
   double spindle_rpm_per_unit = 1000.0;  // rpm per unit of the plant's spindle command u2
   double spindle_min_rpm = 500.0;
   double spindle_max_rpm = 6000.0;
-  double spindle_rate_rpm_s = 3000.0;
+  double spindle_rate_rpm_s = 6000.0;  // 0 -> 6000 rpm in 1 s (vector/servo spindle drive)
   double force_ceiling_N = 3.0;
   double stale_age_s = 0.02;
   ForceFallback fallback = ForceFallback::kHold;
@@ -168,6 +168,12 @@ struct ForceMetrics {
   double position_ramp_lag_mm = 0.0;   // mean (plan - progress) over the last second before the
                                        // disturbance (or the end of the run)
   double disturbance_recovery_s = 0.0; // from the disturbance until |F - ref| <= 2 % of ref for good
+  // kStep only: a lower bound on disturbance_recovery_s for ANY controller under sc.limits: the
+  // first time the force can enter the 2 % band at all, with the override driven to its extreme
+  // and the spindle to its extreme at their rate limits from the disturbance on (the plant's step
+  // responses are monotone, so no other admissible input gets there earlier). 0 when the
+  // disturbance is within the band; 1e9 when the band is unreachable within the limits.
+  double disturbance_recovery_bound_s = 0.0;
   double steady_force_error = 0.0;     // max |F - ref| over that last second
 };
 

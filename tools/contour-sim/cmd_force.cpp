@@ -178,6 +178,11 @@ int run_force(int argc, char** argv) {
   j["position_rms_error_mm"] = m.position_rms_error_mm;
   j["position_ramp_lag_mm"] = m.position_ramp_lag_mm;
   j["disturbance_recovery_s"] = m.disturbance_recovery_s;
+  j["disturbance_N"] = (sc.kind == ForceScenarioKind::kStep || sc.kind == ForceScenarioKind::kImpulse)
+                           ? sc.disturbance_N
+                           : 0.0;
+  // Minimum recovery time ANY controller could reach with these actuator limits (kStep only).
+  j["disturbance_recovery_bound_s"] = m.disturbance_recovery_bound_s;
   j["steady_force_error"] = m.steady_force_error;
   std::cout << j.dump() << '\n';
   return m.stable ? 0 : 1;

@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "config/config.hpp"
+#include "control/force_controller.hpp"
 
 using namespace contour::config;
 
@@ -71,4 +74,42 @@ TEST(ForceConfig, ErrorsNameLineAndKey) {
   EXPECT_TRUE(any(e, "force.bogus: unknown key")) << (e.empty() ? "" : e[0]);
   e = errors_of("force:\n  spindle: {min_rpm: 5000, max_rpm: 4000}\n");
   EXPECT_TRUE(any(e, "force.spindle.max_rpm")) << (e.empty() ? "" : e[0]);
+}
+
+// Issue 5 bars with the SHIPPED example file (its limits and weights), physical plant, 1 kHz.
+TEST(ForceConfig, ShippedPhysicalConfigMeetsTheBars) {
+  using namespace contour::control;
+  const Config c = load_config_file(std::string(CONTOUR_SOURCE_DIR) + "/config/force_physical.yaml");
+  auto p = c.force.design;
+  p.period_s = c.machine.period_s;
+  ASSERT_DOUBLE_EQ(p.period_s, 0.001);
+  const ForceDesign d = design_force_2dof(p);
+  EXPECT_GE(d.quality.input_phase_margin_deg[0], 60.0);
+  EXPECT_GE(d.quality.input_phase_margin_deg[1], 60.0);
+  EXPECT_GE(d.quality.delay_margin_s, 0.020);
+  // Sensible limits: the interpolator's override range, a real spindle range and rate.
+  EXPECT_LE(c.force.limits.override_max, 1.5);
+  EXPECT_LE(c.force.limits.override_rate_per_s, 10.0);
+  EXPECT_LE(c.force.limits.spindle_rate_rpm_s, 6000.0);
+  EXPECT_LE(c.force.limits.spindle_max_rpm, 12000.0);
+  ForceScenario sc;
+  sc.kind = ForceScenarioKind::kStep;
+  sc.true_plant = p.plant;
+  sc.limits = c.force.limits;
+  sc.force_ref_N = c.force.reference_N;
+  sc.feed_mm_s = p.plant.k_v_mm_s;
+  sc.disturbance_N = 0.5 * c.force.reference_N;  // as contour-sim force --scenario step
+  const ForceMetrics m = run_force_scenario(d, sc);
+  const double ts_model = 5.8335 * p.tau_m_s;
+  EXPECT_TRUE(m.stable);
+  EXPECT_LE(m.force_overshoot_pct, 0.0);
+  EXPECT_NEAR(m.force_settling_s, ts_model, 0.05 * ts_model);
+  EXPECT_LT(m.steady_force_error, 1e-6);
+  EXPECT_LE(m.disturbance_recovery_s, 0.3);
+  EXPECT_LE(std::abs(m.position_ramp_lag_mm), 0.01);
+  sc.kind = ForceScenarioKind::kImpulse;
+  sc.disturbance_N = 2.0 * c.force.reference_N;
+  EXPECT_LE(run_force_scenario(d, sc).disturbance_recovery_s, 0.5);
+  sc.limits.anti_windup = false;
+  EXPECT_GT(run_force_scenario(d, sc).disturbance_recovery_s, 0.5);
 }

@@ -51,13 +51,14 @@ TEST(ForceController, SaturationWithForcePulseRecoversWithoutWindup) {
   sc.kind = ForceScenarioKind::kImpulse;
   sc.disturbance_N = 2.0;   // 20 ms pulse of twice the reference: far beyond what the limits give
   sc.pulse_s = 0.02;
-  sc.limits = ForceLimits{};  // 0..150 %, 10 /s; spindle 500..6000 rpm, 3000 rpm/s
+  sc.limits = ForceLimits{};  // shipped: 0..150 %, 10 /s; spindle 500..6000 rpm, 6000 rpm/s
   ForceTrace tr;
   const ForceMetrics m = run_force_scenario(design(), sc, &tr);
   bool saturated = false;
+  const double drpm = sc.limits.spindle_rate_rpm_s * 1e-3, dov = sc.limits.override_rate_per_s * 1e-3;
   for (std::size_t i = 1; i < tr.t_s.size(); ++i) {
-    const bool at_rate = std::abs(tr.spindle_rpm[i] - tr.spindle_rpm[i - 1]) >= 3.0 - 1e-9 ||
-                         std::abs(tr.feed_override[i] - tr.feed_override[i - 1]) >= 0.01 - 1e-12;
+    const bool at_rate = std::abs(tr.spindle_rpm[i] - tr.spindle_rpm[i - 1]) >= drpm - 1e-9 ||
+                         std::abs(tr.feed_override[i] - tr.feed_override[i - 1]) >= dov - 1e-12;
     if (tr.t_s[i] > 5.0 && at_rate) saturated = true;
   }
   EXPECT_TRUE(saturated) << "the pulse must drive an output into its rate limit";
