@@ -1,21 +1,25 @@
 // contourd — the real-time servo daemon.
-// Implemented so far: --check-config and --latency-test. The servo loop, planner and command
-// socket land with the daemon issue; without --check-config/--latency-test contourd says so and
-// exits 1 (it never pretends to run a machine).
+//   contourd --config FILE [--socket PATH]     run (systemd Type=notify)
+//   contourd --config FILE --check-config      validate, print every error, exit 78 on errors
+//   contourd --latency-test SECONDS            RT set-up and wake-up lateness without drives
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include "config/config.hpp"
+#include "daemon/daemon.hpp"
 #include "daemon/latency_test.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"contourd: real-time CNC servo daemon"};
   std::string config_path;
+  std::string socket_path;
   bool check_only = false;
   double latency_s = 0.0;
   contour::daemon::LatencyTestOptions lat;
   app.add_option("--config", config_path, "YAML configuration file");
+  app.add_option("--socket", socket_path, "command socket path (overrides socket.path)");
   app.add_flag("--check-config", check_only, "validate the configuration and exit (78 on errors)");
   app.add_option("--latency-test", latency_s,
                  "run the RT loop set-up without drives for SECONDS and report wake-up lateness")
@@ -34,15 +38,29 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "contourd: --config FILE is required\n");
     return 2;
   }
+  contour::config::Config cfg;
   try {
-    auto cfg = contour::config::load_config_file(config_path);
-    std::printf("%s: configuration OK (%zu axes)\n", config_path.c_str(), cfg.machine.axes.size());
+    cfg = contour::config::load_config_file(config_path);
   } catch (const contour::config::ConfigError& e) {
     for (const auto& m : e.errors()) std::fprintf(stderr, "%s\n", m.c_str());
+    std::fprintf(stderr, "contourd: %zu configuration error(s)\n", e.errors().size());
     return 78;  // EX_CONFIG
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", config_path.c_str(), e.what());
+    return 78;
   }
-  if (check_only) return 0;
-  std::fputs("contourd: the real-time servo loop is not implemented yet (daemon issue); exiting\n",
-             stderr);
-  return 1;
+  if (check_only) {
+    std::printf("%s: configuration OK (%zu axes)\n", config_path.c_str(), cfg.machine.axes.size());
+    return 0;
+  }
+  contour::daemon::DaemonOptions opt;
+  opt.config_path = config_path;
+  if (!socket_path.empty()) opt.socket_path = socket_path;
+  try {
+    contour::daemon::Daemon d(std::move(cfg), opt);
+    return d.run();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "contourd: %s\n", e.what());
+    return 1;
+  }
 }

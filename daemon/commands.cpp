@@ -1,0 +1,511 @@
+// Command socket handlers (Daemon::handle). Every argument is validated with a clear error; a
+// command that is illegal in the current state gets an error reply naming the state.
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <thread>
+
+#include "daemon/commands.hpp"
+#include "daemon/daemon.hpp"
+
+namespace contour::daemon {
+
+namespace {
+
+using nlohmann::json;
+
+const json& arg(const json& req, const char* key) {
+  if (!req.contains(key)) throw CommandError(std::string("missing argument '") + key + "'");
+  return req.at(key);
+}
+
+double number_arg(const json& req, const char* key, double lo, double hi) {
+  const json& v = arg(req, key);
+  if (!v.is_number()) throw CommandError(std::string("argument '") + key + "' must be a number");
+  const double x = v.get<double>();
+  if (!std::isfinite(x) || x < lo || x > hi) {
+    throw CommandError(std::string("argument '") + key + "' = " + std::to_string(x) +
+                       " out of range [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+  }
+  return x;
+}
+
+void only_keys(const json& req, std::initializer_list<const char*> keys) {
+  for (auto it = req.begin(); it != req.end(); ++it) {
+    if (it.key() == "id" || it.key() == "cmd") continue;
+    bool ok = false;
+    for (const char* k : keys) ok = ok || it.key() == k;
+    if (!ok) throw CommandError("unknown argument '" + it.key() + "'");
+  }
+}
+
+json arr3(const std::array<double, 3>& a, int axes) {
+  json j = json::array();
+  for (int i = 0; i < axes; ++i) j.push_back(a[static_cast<std::size_t>(i)]);
+  return j;
+}
+
+}  // namespace
+
+int axis_index(const json& v, const config::MachineConfig& m) {
+  if (v.is_number_integer()) {
+    const auto i = v.get<long>();
+    if (i < 0 || i >= static_cast<long>(m.axes.size())) throw CommandError("axis index out of range");
+    return static_cast<int>(i);
+  }
+  if (v.is_string()) {
+    const auto s = v.get<std::string>();
+    for (std::size_t i = 0; i < m.axes.size(); ++i) {
+      if (m.axes[i].name == s || (s.size() == 1 && m.axes[i].name.size() == 1 &&
+                                  std::toupper(static_cast<unsigned char>(s[0])) == m.axes[i].name[0])) {
+        return static_cast<int>(i);
+      }
+    }
+    throw CommandError("unknown axis '" + s + "'");
+  }
+  throw CommandError("argument 'axis' must be an axis name or index");
+}
+
+json Daemon::status_json() {
+  const auto st = loop_->status();
+  const int axes = loop_->axes();
+  auto& cs = loop_->stats();
+  const auto& h = cs.wake_lateness;
+  json j{{"state", to_string(st.state)},
+         {"cause", to_string(st.cause)},
+         {"cycle", st.cycle},
+         {"ref_mm", arr3(st.ref_mm, axes)},
+         {"act_mm", arr3(st.act_mm, axes)},
+         {"cmd_mm_s", arr3(st.cmd_mm_s, axes)},
+         {"contour_error_um", st.eps_norm_mm * 1e3},
+         {"progress_mm", st.progress_mm},
+         {"line", st.line},
+         {"override", st.override_applied},
+         {"feed_override", st.feed_override},
+         {"job", st.attached_job},
+         {"loaded_job", loaded_job_},
+         {"finished_job", st.finished_job},
+         {"finished_ok", st.finished_ok},
+         {"jogging", st.jogging},
+         {"program_hold", st.interp_holding},
+         {"drives_enabled", st.drives_enabled},
+         {"recording", writer_->recording()},
+         {"gains_generation", st.gains_generation},
+         {"gains_cycle", st.gains_cycle},
+         {"underruns", st.underruns},
+         {"missed_tpdos", st.missed_tpdos},
+         {"velocity_clamps", st.velocity_clamps},
+         {"telemetry_dropped", writer_->dropped()},
+         {"events_dropped", logger_->dropped()},
+         {"timing",
+          {{"cycles", cs.cycles.load()},
+           {"overruns", cs.overruns.load()},
+           {"skipped_periods", cs.skipped_periods.load()},
+           {"compute_max_us", static_cast<double>(cs.compute_max_ns.load()) / 1e3},
+           {"compute_last_us", static_cast<double>(cs.compute_last_ns.load()) / 1e3},
+           {"lateness_max_us", static_cast<double>(h.max_ns()) / 1e3},
+           {"lateness_mean_us", h.mean_us()},
+           {"lateness_p99_us", h.quantile_us(0.99)},
+           {"realtime", rt_report_.realtime},
+           {"memory_locked", rt_report_.memory_locked}}}};
+  if (st.fault_axis >= 0 || st.cause != FaultCause::kNone) {
+    j["fault"] = {{"cause", to_string(st.cause)}, {"axis", st.fault_axis},
+                  {"value", st.fault_value}, {"limit", st.fault_limit}};
+  }
+  return j;
+}
+
+json Daemon::result_json(std::uint64_t job) {
+  // Wait until the writer has seen the samples up to the program's end.
+  const auto st = loop_->status();
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (st.finished_job == job && writer_->last_cycle() < st.finished_cycle &&
+         std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  const RunStats rs = writer_->stats(job);
+  json faults = json::array();
+  std::uint64_t ov0 = 0;
+  {
+    std::lock_guard lk(jobs_mu_);
+    auto it = jobs_.find(job);
+    if (it != jobs_.end()) {
+      for (const auto& f : it->second.faults) faults.push_back(f);
+      ov0 = it->second.overruns_at_start;
+    }
+  }
+  std::string state = std::string(to_string(st.state));
+  if (st.attached_job == job) state = std::string(to_string(st.state));
+  return {{"job", job},
+          {"state", state},
+          {"finished", st.finished_job == job},
+          {"completed", st.finished_job == job && st.finished_ok},
+          {"duration_s", rs.duration_s(loop_->period_s())},
+          {"max_contour_error_um", rs.max_contour_error_um},
+          {"rms_contour_error_um", rs.rms_contour_error_um()},
+          {"max_model_error_um", rs.max_model_error_um},
+          {"max_following_error_um", rs.max_following_error_um},
+          {"end_overshoot_um", rs.end_overshoot_um},
+          {"samples", rs.samples},
+          {"telemetry_dropped", writer_->dropped()},
+          {"faults", faults},
+          {"overruns", loop_->stats().overruns.load() - ov0}};
+}
+
+void Daemon::free_released_jobs() {
+  const auto st = loop_->status();
+  std::lock_guard lk(jobs_mu_);
+  for (auto& [id, rec] : jobs_) {
+    // The loop no longer touches a job once released or replaced; keep the record (faults) but
+    // drop the interpolator and queue.
+    if (rec.job && id != st.attached_job && id != loaded_job_ && id <= st.released_job) rec.job.reset();
+  }
+  while (jobs_.size() > 64) jobs_.erase(jobs_.begin());
+}
+
+json Daemon::cmd_load(const json& req) {
+  only_keys(req, {"path", "program", "name"});
+  const auto st = loop_->status();
+  if (st.state != MachineState::kReady) {
+    throw CommandError(std::string("load is not allowed in state ") + std::string(to_string(st.state)) +
+                       " (needs READY)");
+  }
+  if (st.jogging) throw CommandError("load is not allowed while jogging");
+  ProgramSource src;
+  if (req.contains("path") == req.contains("program")) {
+    throw CommandError("load needs exactly one of 'path' (file on the daemon's host) or 'program' (text)");
+  }
+  if (req.contains("path")) {
+    if (!req["path"].is_string()) throw CommandError("argument 'path' must be a string");
+    src.path = req["path"].get<std::string>();
+    src.name = src.path;
+  } else {
+    if (!req["program"].is_string()) throw CommandError("argument 'program' must be a string");
+    src.text = req["program"].get<std::string>();
+    src.name = "<inline>";
+    if (req.contains("name")) {
+      if (!req["name"].is_string()) throw CommandError("argument 'name' must be a string");
+      src.name = req["name"].get<std::string>();
+    }
+  }
+  const Eigen::Vector3d start(st.ref_mm[0], st.ref_mm[1], st.ref_mm[2]);
+  ProgramSummary sum;
+  try {
+    sum = planner_->validate(src, start);
+  } catch (const ProgramError& e) {
+    throw CommandError(std::string("load: ") + e.what());
+  }
+  std::uint64_t id = 0;
+  {
+    std::lock_guard lk(jobs_mu_);
+    id = next_job_++;
+  }
+  writer_->begin_job(id);
+  auto job = planner_->start(src, start, id, [this](std::uint64_t j, const control::PlannedSegment& s) {
+    writer_->add_segment(j, s);
+  });
+  ProgramPlanner::wait_prefill(*job, 10.0);
+  if (job->planner_failed.load()) throw CommandError("load: " + planner_->error());
+  {
+    std::lock_guard lk(jobs_mu_);
+    jobs_[id] = JobRecord{job, src.name, {}, 0};
+  }
+  if (!loop_->post({CommandKind::kAttachJob, 0, 0.0, 0.0, job.get()})) {
+    throw CommandError("command queue full; retry");
+  }
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  while (loop_->status().attached_job != id && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  if (loop_->status().attached_job != id) throw CommandError("load: the loop did not take the program");
+  loaded_job_ = id;
+  spdlog::info("loaded {} as job {} ({} lines, {} moves, {:.3f} mm)", src.name, id, sum.lines,
+               sum.motion_blocks, sum.length_mm);
+  return {{"job", id}, {"name", src.name}, {"lines", sum.lines}, {"motion_blocks", sum.motion_blocks},
+          {"length_mm", sum.length_mm}};
+}
+
+json Daemon::cmd_gains(const json& req) {
+  only_keys(req, {"set", "op"});
+  auto params_json = [this]() {
+    const auto& p = loop_->active_params();
+    json kp = json::array(), ki = json::array(), kd = json::array(), ff = json::array();
+    for (int i = 0; i < p.axes; ++i) {
+      kp.push_back(p.axis[static_cast<std::size_t>(i)].kp);
+      ki.push_back(p.axis[static_cast<std::size_t>(i)].ki_per_s);
+      kd.push_back(p.axis[static_cast<std::size_t>(i)].kd_s);
+      ff.push_back(p.axis[static_cast<std::size_t>(i)].ff);
+    }
+    const auto st = loop_->status();
+    return json{{"law", p.law == control::AxisLaw::kPid ? "pid" : "p"},
+                {"kp", kp}, {"ki_per_s", ki}, {"kd_s", kd}, {"ff", ff},
+                {"coupling", p.coupling.enable}, {"cp", p.coupling.cp},
+                {"ci_per_s", p.coupling.ci_per_s}, {"cd_s", p.coupling.cd_s},
+                {"generation", st.gains_generation}, {"active_since_cycle", st.gains_cycle}};
+  };
+  if (!req.contains("set")) return params_json();
+  const json& set = req["set"];
+  if (!set.is_object() || set.empty()) throw CommandError("'set' must be a non-empty object of gains");
+  if (loop_->status().state == MachineState::kRunning) {
+    throw CommandError("gains cannot change while RUNNING (hold first): the controller state restarts");
+  }
+  control::ServoParams p = loop_->active_params();
+  auto per_axis = [&](const std::string& key, double control::AxisGains::*field, double lo, double hi) {
+    const json& v = set[key];
+    std::vector<double> vals;
+    if (v.is_number()) {
+      vals.assign(static_cast<std::size_t>(p.axes), v.get<double>());
+    } else if (v.is_array() && v.size() == static_cast<std::size_t>(p.axes)) {
+      for (const auto& x : v) {
+        if (!x.is_number()) throw CommandError("gain '" + key + "' entries must be numbers");
+        vals.push_back(x.get<double>());
+      }
+    } else {
+      throw CommandError("gain '" + key + "' must be a number or an array of " + std::to_string(p.axes));
+    }
+    for (std::size_t i = 0; i < vals.size(); ++i) {
+      if (!std::isfinite(vals[i]) || vals[i] < lo || vals[i] > hi) {
+        throw CommandError("gain '" + key + "' = " + std::to_string(vals[i]) + " out of range [" +
+                           std::to_string(lo) + ", " + std::to_string(hi) + "]");
+      }
+      p.axis[i].*field = vals[i];
+    }
+  };
+  auto scalar = [&](const std::string& key, double lo, double hi) {
+    const json& v = set[key];
+    if (!v.is_number() || !std::isfinite(v.get<double>()) || v.get<double>() < lo || v.get<double>() > hi) {
+      throw CommandError("gain '" + key + "' must be a number in [" + std::to_string(lo) + ", " +
+                         std::to_string(hi) + "]");
+    }
+    return v.get<double>();
+  };
+  for (auto it = set.begin(); it != set.end(); ++it) {
+    const std::string& k = it.key();
+    if (k == "kp") per_axis(k, &control::AxisGains::kp, 0.0, 100.0);
+    else if (k == "ki_per_s") per_axis(k, &control::AxisGains::ki_per_s, 0.0, 1e4);
+    else if (k == "kd_s") per_axis(k, &control::AxisGains::kd_s, 0.0, 10.0);
+    else if (k == "ff") per_axis(k, &control::AxisGains::ff, 0.0, 1.0);
+    else if (k == "cp") p.coupling.cp = scalar(k, 0.0, 1e3);
+    else if (k == "ci_per_s") p.coupling.ci_per_s = scalar(k, 0.0, 1e5);
+    else if (k == "cd_s") p.coupling.cd_s = scalar(k, 0.0, 100.0);
+    else if (k == "coupling") {
+      if (!it.value().is_boolean()) throw CommandError("gain 'coupling' must be true or false");
+      p.coupling.enable = it.value().get<bool>();
+    } else {
+      throw CommandError("unknown gain '" + k + "' (kp, ki_per_s, kd_s, ff, cp, ci_per_s, cd_s, coupling)");
+    }
+  }
+  // Stability check of the normal-direction loop (control/servo_controller.hpp loop_margin).
+  for (int i = 0; i < p.axes; ++i) {
+    const auto m = control::loop_margin(p.drive[static_cast<std::size_t>(i)], p.axis[static_cast<std::size_t>(i)],
+                                        p.coupling, p.delay_cycles, p.delay_compensation);
+    if (!(m.spectral_radius < 1.0)) {
+      throw CommandError("gains rejected: axis " + std::to_string(i) +
+                         " loop would be unstable (spectral radius " + std::to_string(m.spectral_radius) + ")");
+    }
+  }
+  std::uint64_t gen = 0;
+  try {
+    gen = loop_->stage_gains(p);
+  } catch (const std::exception& e) {
+    throw CommandError(std::string("gains rejected: ") + e.what());
+  }
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  while (loop_->status().gains_generation < gen && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  spdlog::info("gains generation {} active", gen);
+  return params_json();
+}
+
+json Daemon::cmd_jog(const json& req) {
+  only_keys(req, {"axis", "velocity_mm_min", "distance_mm"});
+  const int axis = axis_index(arg(req, "axis"), cfg_.machine);
+  const double v = number_arg(req, "velocity_mm_min", 1e-3, cfg_.safety.jog_max_velocity_mm_min);
+  const double d = number_arg(req, "distance_mm", -1e4, 1e4);
+  if (d == 0.0) throw CommandError("argument 'distance_mm' must not be 0");
+  const auto st = loop_->status();
+  if (st.state != MachineState::kReady || st.attached_job != 0 || st.jogging) {
+    throw CommandError(std::string("jog is not allowed in state ") + std::string(to_string(st.state)) +
+                       (st.attached_job != 0 ? " with a program loaded (stop unloads it)" : "") +
+                       (st.jogging ? " while jogging" : ""));
+  }
+  const auto& ax = cfg_.machine.axes[static_cast<std::size_t>(axis)];
+  const double target = st.ref_mm[static_cast<std::size_t>(axis)] + d;
+  if (target < ax.min_mm || target > ax.max_mm) {
+    throw CommandError("jog target " + std::to_string(target) + " mm outside the soft limits of " +
+                       ax.name + " [" + std::to_string(ax.min_mm) + ", " + std::to_string(ax.max_mm) + "]");
+  }
+  loop_->post({CommandKind::kJog, axis, v / 60.0, d});
+  return {{"axis", ax.name}, {"target_mm", target}};
+}
+
+json Daemon::cmd_set_position(const json& req) {
+  only_keys(req, {"axis", "position_mm"});
+  const int axis = axis_index(arg(req, "axis"), cfg_.machine);
+  const auto& ax = cfg_.machine.axes[static_cast<std::size_t>(axis)];
+  const double pos = number_arg(req, "position_mm", ax.min_mm, ax.max_mm);
+  const auto st = loop_->status();
+  if ((st.state != MachineState::kReady && st.state != MachineState::kDisabled) || st.attached_job != 0 ||
+      st.jogging) {
+    throw CommandError(std::string("set-position is not allowed in state ") +
+                       std::string(to_string(st.state)) + (st.attached_job != 0 ? " with a program loaded" : ""));
+  }
+  loop_->post({CommandKind::kSetPosition, axis, pos, 0.0});
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+  while (std::chrono::steady_clock::now() < until) {
+    const auto s = loop_->status();
+    if (std::abs(s.act_mm[static_cast<std::size_t>(axis)] - pos) < 1e-3 && s.cycle > st.cycle + 2) {
+      return {{"axis", ax.name}, {"position_mm", pos}};
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  throw CommandError("set-position: the bus did not accept the new position");
+}
+
+json Daemon::cmd_record(const json& req) {
+  only_keys(req, {"action", "path"});
+  const json& a = arg(req, "action");
+  if (!a.is_string()) throw CommandError("argument 'action' must be \"start\" or \"stop\"");
+  if (a == "start") {
+    std::string path;
+    if (req.contains("path")) {
+      if (!req["path"].is_string()) throw CommandError("argument 'path' must be a string");
+      path = req["path"].get<std::string>();
+    } else {
+      path = (std::filesystem::path(expand_env(cfg_.telemetry.directory)) /
+              ("contourd-" + std::to_string(loop_->status().cycle) + ".csv")).string();
+    }
+    try {
+      writer_->start_recording(path);
+    } catch (const std::exception& e) {
+      throw CommandError(std::string("record: ") + e.what());
+    }
+    return {{"recording", true}, {"path", path}};
+  }
+  if (a == "stop") return {{"recording", false}, {"path", writer_->stop_recording()}};
+  throw CommandError("argument 'action' must be \"start\" or \"stop\"");
+}
+
+json Daemon::handle(const json& req, const ClientInfo& client) {
+  const std::string cmd = req.at("cmd").get<std::string>();
+  auto state_name = [this]() { return std::string(to_string(loop_->status().state)); };
+  auto simple = [&](CommandKind k, std::initializer_list<MachineState> allowed) -> json {
+    only_keys(req, {});
+    const auto st = loop_->status();
+    bool ok = false;
+    for (auto s : allowed) ok = ok || st.state == s;
+    if (!ok) throw CommandError(cmd + " is not allowed in state " + state_name());
+    const MachineState now = post_and_wait({k}, st.state, 1.0);
+    if (now == st.state && k != CommandKind::kEnable) {
+      throw CommandError(cmd + " refused by the loop in state " + std::string(to_string(now)));
+    }
+    return status_json();
+  };
+  using S = MachineState;
+  if (cmd == "status") {
+    only_keys(req, {});
+    return status_json();
+  }
+  if (cmd == "load") return cmd_load(req);
+  if (cmd == "run") {
+    only_keys(req, {"path", "program", "name"});
+    if (req.contains("path") || req.contains("program")) cmd_load(req);
+    const auto st = loop_->status();
+    if (st.state != S::kReady) throw CommandError("run is not allowed in state " + state_name());
+    if (st.attached_job == 0) throw CommandError("run: no program loaded (load one first)");
+    const std::uint64_t job = st.attached_job;
+    {
+      std::lock_guard lk(jobs_mu_);
+      jobs_[job].overruns_at_start = loop_->stats().overruns.load();
+    }
+    const MachineState now = post_and_wait({CommandKind::kRun}, st.state, 1.0);
+    if (now != S::kRunning && loop_->status().finished_job != job) {
+      throw CommandError("run refused by the loop (state " + std::string(to_string(now)) + ")");
+    }
+    return {{"job", job}, {"state", to_string(now)}};
+  }
+  if (cmd == "hold") return simple(CommandKind::kHold, {S::kRunning});
+  if (cmd == "resume") return simple(CommandKind::kResume, {S::kHold});
+  if (cmd == "stop") {
+    only_keys(req, {});
+    const auto st = loop_->status();
+    if (st.state != S::kRunning && st.state != S::kHold && !st.jogging && st.attached_job == 0) {
+      throw CommandError("stop: nothing to stop in state " + state_name());
+    }
+    loop_->post({CommandKind::kStop});
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (std::chrono::steady_clock::now() < until) {
+      const auto s = loop_->status();
+      if (s.cycle > st.cycle + 2 && s.state != S::kRunning && s.state != S::kHold && !s.jogging) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    loaded_job_ = 0;
+    return status_json();
+  }
+  if (cmd == "estop") {
+    only_keys(req, {});
+    post_and_wait({CommandKind::kEstop}, loop_->status().state, 0.5);
+    spdlog::warn("E-STOP from socket client pid {} uid {}", client.pid, client.uid);
+    loaded_job_ = 0;
+    return status_json();
+  }
+  if (cmd == "reset") {
+    only_keys(req, {});
+    const auto st = loop_->status();
+    if (st.state != S::kFault && st.state != S::kEstop) {
+      throw CommandError("reset is only for FAULT or ESTOP (state " + state_name() + ")");
+    }
+    const MachineState now = post_and_wait({CommandKind::kReset}, st.state, 1.0);
+    if (now == S::kFault || now == S::kEstop) {
+      throw CommandError("reset refused: the cause (" + std::string(to_string(st.cause)) + ") is still present");
+    }
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    while (loop_->status().state != S::kReady && std::chrono::steady_clock::now() < until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    return status_json();
+  }
+  if (cmd == "enable") return simple(CommandKind::kEnable, {S::kDisabled});
+  if (cmd == "disable") return simple(CommandKind::kDisable, {S::kReady, S::kEnabling});
+  if (cmd == "jog") return cmd_jog(req);
+  if (cmd == "set-position" || cmd == "home") return cmd_set_position(req);
+  if (cmd == "gains") return cmd_gains(req);
+  if (cmd == "override") {
+    only_keys(req, {"percent"});
+    const double pct = number_arg(req, "percent", 0.0, cfg_.interpolator.feed_override_max_percent);
+    loop_->post({CommandKind::kSetOverride, 0, pct / 100.0, 0.0});
+    return {{"feed_override_percent", pct}};
+  }
+  if (cmd == "record") return cmd_record(req);
+  if (cmd == "result") {
+    only_keys(req, {"job"});
+    const json& j = arg(req, "job");
+    if (!j.is_number_unsigned()) throw CommandError("argument 'job' must be a job number");
+    return result_json(j.get<std::uint64_t>());
+  }
+  if (cmd == "subscribe" || cmd == "unsubscribe") {
+    only_keys(req, {"topic"});
+    const json& t = arg(req, "topic");
+    if (!t.is_string() || (t != "telemetry" && t != "events")) {
+      throw CommandError("argument 'topic' must be \"telemetry\" or \"events\"");
+    }
+    if (cmd == "subscribe") server_->subscribe(client.id, t.get<std::string>());
+    else server_->unsubscribe(client.id, t.get<std::string>());
+    return {{"topic", t}};
+  }
+  if (cmd == "force") {
+    throw CommandError("force: the force channel is not wired into contourd yet");
+  }
+  if (cmd == "shutdown") {
+    only_keys(req, {});
+    spdlog::info("shutdown requested by socket client pid {} uid {}", client.pid, client.uid);
+    request_shutdown();
+    return {{"shutting_down", true}};
+  }
+  throw CommandError("unknown command '" + cmd + "'");
+}
+
+}  // namespace contour::daemon

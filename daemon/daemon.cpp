@@ -1,0 +1,281 @@
+#include "daemon/daemon.hpp"
+
+#include <signal.h>
+#include <spdlog/spdlog.h>
+#include <systemd/sd-daemon.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <ctime>
+#include <stdexcept>
+#include <thread>
+
+#include "daemon/sim_bus.hpp"
+
+namespace contour::daemon {
+
+std::string expand_env(const std::string& s) {
+  std::string out;
+  std::size_t i = 0;
+  while (i < s.size()) {
+    if (s[i] == '$' && i + 1 < s.size() && s[i + 1] == '{') {
+      const std::size_t end = s.find('}', i);
+      if (end == std::string::npos) break;
+      std::string expr = s.substr(i + 2, end - i - 2);
+      std::string def;
+      const std::size_t dash = expr.find(":-");
+      if (dash != std::string::npos) {
+        def = expr.substr(dash + 2);
+        expr = expr.substr(0, dash);
+      }
+      const char* v = std::getenv(expr.c_str());
+      out += (v != nullptr && *v != '\0') ? std::string(v) : def;
+      i = end + 1;
+    } else {
+      out += s[i++];
+    }
+  }
+  if (i < s.size()) out += s.substr(i);
+  return out;
+}
+
+Daemon::Daemon(config::Config cfg, DaemonOptions opt) : cfg_(std::move(cfg)), opt_(std::move(opt)) {}
+
+Daemon::~Daemon() { stop_components(); }
+
+void Daemon::on_event(const RtEvent& e, const std::string& text) {
+  if (e.kind == EventKind::kFault) {
+    std::lock_guard lk(jobs_mu_);
+    recent_faults_.push_back(text);
+    if (recent_faults_.size() > 32) recent_faults_.erase(recent_faults_.begin());
+    auto it = jobs_.find(e.job);
+    if (it != jobs_.end()) it->second.faults.push_back(text);
+  }
+  if (server_) server_->publish("events", {{"event", "log"}, {"text", text}});
+}
+
+void Daemon::start_components() {
+  if (cfg_.bus.type != "sim") {
+    throw std::runtime_error("bus.type '" + cfg_.bus.type +
+                             "' is not wired into contourd yet (only 'sim'); see daemon/README.md");
+  }
+  std::vector<control::FeedDriveParams> drives;
+  for (const auto& a : cfg_.machine.axes) {
+    control::FeedDriveParams p = a.drive;
+    p.period_s = cfg_.machine.period_s;
+    drives.push_back(p);
+  }
+  bus_ = std::make_unique<SimBus>(drives);
+  bus_->start();
+  loop_ = std::make_unique<ServoLoop>(cfg_, *bus_);
+  writer_ = std::make_unique<TelemetryWriter>(loop_->telemetry(), loop_->period_s());
+  writer_->set_stream(
+      [this](const TelemetrySample& s) {
+        if (!server_) return;
+        server_->publish("telemetry",
+                         {{"event", "telemetry"}, {"cycle", s.cycle}, {"state", to_string(s.state)},
+                          {"ref_mm", s.ref_mm}, {"act_mm", s.act_mm}, {"eps_mm", s.eps_mm},
+                          {"line", s.line}, {"progress_mm", s.progress_mm}});
+      },
+      100);
+  writer_->start();
+  logger_ = std::make_unique<EventLogger>(loop_->events(),
+                                          [this](const RtEvent& e, const std::string& t) { on_event(e, t); });
+  logger_->start();
+  planner_ = std::make_unique<ProgramPlanner>(cfg_);
+
+  RtSetupRequest req;
+  req.priority = cfg_.loop.priority;
+  req.cpu = cfg_.loop.cpu;
+  req.lock_memory = cfg_.loop.lock_memory;
+  req.require_realtime = cfg_.loop.require_realtime;
+  if (req.priority == 0) req.require_realtime = false;
+  rt_report_ = rt_.start(req, [this] { loop_->run(rt_stop_); });
+  for (const auto& w : rt_report_.warnings) {
+    spdlog::warn("REAL-TIME NOT AVAILABLE: {} (the loop runs, but its timing is not guaranteed; "
+                 "set loop.require_realtime: true to refuse)", w);
+  }
+  spdlog::info("RT loop: {} period {} us, {}, memory {}", bus_->describe(), cfg_.loop.period_us,
+               rt_report_.realtime ? "SCHED_FIFO" : "SCHED_OTHER", rt_report_.memory_locked ? "locked" : "not locked");
+
+  CommandServerOptions so;
+  so.path = expand_env(opt_.socket_path ? *opt_.socket_path : cfg_.socket.path);
+  so.mode = static_cast<mode_t>(cfg_.socket.mode);
+  so.group = cfg_.socket.group;
+  so.max_clients = static_cast<std::size_t>(cfg_.socket.max_clients);
+  so.max_line_bytes = static_cast<std::size_t>(cfg_.socket.max_line_bytes);
+  server_ = std::make_unique<CommandServer>(
+      so, [this](const nlohmann::json& r, const ClientInfo& c) { return handle(r, c); });
+  server_->start();
+  spdlog::info("command socket {}", so.path);
+}
+
+void Daemon::stop_components() {
+  if (server_) server_->stop();
+  if (planner_) planner_->abort_and_join();
+  if (rt_.joinable()) {
+    rt_stop_.store(true, std::memory_order_release);
+    rt_.join();
+  }
+  if (bus_) bus_->stop();
+  if (writer_) writer_->stop();
+  if (logger_) logger_->stop();
+  server_.reset();
+  spdlog::default_logger()->flush();
+}
+
+MachineState Daemon::post_and_wait(const LoopCommand& c, MachineState from, double timeout_s) {
+  const std::uint64_t c0 = loop_->status().cycle;
+  if (!loop_->post(c)) throw CommandError("command queue full; retry");
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  // Give the loop at least two cycles to take the command, then until the state changes.
+  while (std::chrono::steady_clock::now() < until) {
+    const auto st = loop_->status();
+    if (st.cycle >= c0 + 2 && st.state != from) return st.state;
+    if (st.cycle >= c0 + 2 && c.kind != CommandKind::kEnable && c.kind != CommandKind::kReset &&
+        c.kind != CommandKind::kStop) {
+      return st.state;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return loop_->status().state;
+}
+
+void Daemon::controlled_shutdown() {
+  spdlog::info("shutdown: controlled stop, drives disabled");
+  auto st = loop_->status();
+  if (st.state == MachineState::kRunning || st.state == MachineState::kHold) {
+    loop_->post({CommandKind::kStop});
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (std::chrono::steady_clock::now() < until) {
+      st = loop_->status();
+      if (st.state != MachineState::kRunning && st.state != MachineState::kHold) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  }
+  loop_->post({CommandKind::kDisable});
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (std::chrono::steady_clock::now() < until) {
+    st = loop_->status();
+    if (!st.drives_enabled && st.state != MachineState::kFault) break;
+    if (!st.drives_enabled && st.cmd_mm_s == std::array<double, 3>{}) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  st = loop_->status();
+  spdlog::info("shutdown: state {}, drives {}", to_string(st.state),
+               st.drives_enabled ? "STILL ENABLED" : "disabled");
+}
+
+void Daemon::reload_config() {
+  spdlog::info("SIGHUP: reloading {}", opt_.config_path);
+  config::Config n;
+  try {
+    n = config::load_config_file(opt_.config_path);
+  } catch (const config::ConfigError& e) {
+    for (const auto& m : e.errors()) spdlog::error("SIGHUP: {}", m);
+    spdlog::error("SIGHUP: configuration rejected; nothing changed");
+    return;
+  } catch (const std::exception& e) {
+    spdlog::error("SIGHUP: {}; nothing changed", e.what());
+    return;
+  }
+  try {
+    std::array<control::FeedDriveParams, 3> dp{};
+    int delay = 0;
+    for (std::size_t i = 0; i < cfg_.machine.axes.size() && i < 3; ++i) {
+      dp[i] = cfg_.machine.axes[i].drive;
+      dp[i].period_s = cfg_.machine.period_s;
+      delay = std::max(delay, dp[i].delay_cycles);
+    }
+    const auto p = config::make_servo_params(n.control, n.control.controller, dp,
+                                             static_cast<int>(cfg_.machine.axes.size()),
+                                             cfg_.machine.period_s, delay);
+    if (loop_->status().state == MachineState::kRunning) {
+      spdlog::warn("SIGHUP: gains not changed while RUNNING (hold or finish first, then SIGHUP)");
+    } else {
+      const auto gen = loop_->stage_gains(p);
+      cfg_.control = n.control;
+      spdlog::info("SIGHUP: control gains staged (generation {})", gen);
+    }
+  } catch (const std::exception& e) {
+    spdlog::error("SIGHUP: gains rejected: {}", e.what());
+  }
+  // Everything else needs a restart (the loop holds its limits in a copy taken at start-up).
+  if (n.loop.period_us != cfg_.loop.period_us || n.loop.priority != cfg_.loop.priority ||
+      n.loop.cpu != cfg_.loop.cpu) {
+    spdlog::warn("SIGHUP: loop: changes need a restart");
+  }
+  if (n.safety.ferror_mm != cfg_.safety.ferror_mm || n.safety.min_ferror_mm != cfg_.safety.min_ferror_mm ||
+      n.safety.contour_error_limit_mm != cfg_.safety.contour_error_limit_mm ||
+      n.safety.stop_decel_mm_s2 != cfg_.safety.stop_decel_mm_s2) {
+    spdlog::warn("SIGHUP: safety: limit changes need a restart (not live yet)");
+  }
+  if (n.machine.axes.size() != cfg_.machine.axes.size()) spdlog::warn("SIGHUP: machine: changes need a restart");
+  if (n.socket.path != cfg_.socket.path || n.socket.mode != cfg_.socket.mode) {
+    spdlog::warn("SIGHUP: socket: changes need a restart");
+  }
+  if (n.bus.type != cfg_.bus.type) spdlog::warn("SIGHUP: bus: changes need a restart");
+}
+
+int Daemon::run() {
+  setup_logging(cfg_.log);
+  // Signals are handled synchronously on the main thread; every thread inherits the mask.
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGTERM);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGHUP);
+  sigaddset(&set, SIGPIPE);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);
+  try {
+    start_components();
+  } catch (const std::exception& e) {
+    spdlog::critical("start-up failed: {}", e.what());
+    stop_components();
+    return 1;
+  }
+  // Enable the drives; READY=1 once they are enabled and the loop runs.
+  loop_->post({CommandKind::kEnable});
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (std::chrono::steady_clock::now() < until && loop_->status().state != MachineState::kReady) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  if (loop_->status().state != MachineState::kReady) {
+    spdlog::critical("drives did not enable within 5 s (state {})", to_string(loop_->status().state));
+    stop_components();
+    return 1;
+  }
+  sd_notify(0, "READY=1\nSTATUS=drives enabled, loop running");
+  spdlog::info("ready: drives enabled, loop running");
+  std::uint64_t wd_usec = 0;
+  const bool watchdog = sd_watchdog_enabled(0, &wd_usec) > 0;
+  std::uint64_t last_cycle = loop_->status().cycle;
+  auto last_wd = std::chrono::steady_clock::now();
+  sigdelset(&set, SIGPIPE);
+  while (!shutdown_.load()) {
+    timespec ts{0, 100'000'000};
+    const int sig = sigtimedwait(&set, nullptr, &ts);
+    if (sig == SIGTERM || sig == SIGINT) {
+      spdlog::info("signal {}: shutting down", sig == SIGTERM ? "SIGTERM" : "SIGINT");
+      break;
+    }
+    if (sig == SIGHUP) reload_config();
+    free_released_jobs();
+    if (watchdog) {
+      const auto now = std::chrono::steady_clock::now();
+      const std::uint64_t c = loop_->status().cycle;
+      // Only while the loop's cycle counter advances: a stuck loop stops the pings.
+      if (c != last_cycle && now - last_wd > std::chrono::microseconds(wd_usec / 4)) {
+        sd_notify(0, "WATCHDOG=1");
+        last_wd = now;
+        last_cycle = c;
+      }
+    }
+  }
+  sd_notify(0, "STOPPING=1");
+  controlled_shutdown();
+  stop_components();
+  return 0;
+}
+
+}  // namespace contour::daemon

@@ -1,0 +1,100 @@
+#pragma once
+// contourd composition root: config -> bus (sim; socketcan not wired yet) -> ServoLoop on the RT
+// thread, planner thread, telemetry writer, event logger, command socket; signals and systemd.
+//
+// Threads: main (signals via sigtimedwait, systemd watchdog), RT loop (RtThread, SCHED_FIFO when
+// permitted), planner (per program), telemetry writer, event logger, command server, spdlog's
+// async worker. All non-RT threads are created from main, which stays SCHED_OTHER.
+// Signals: SIGTERM/SIGINT -> controlled stop, drives disabled, files flushed, exit 0;
+// SIGHUP -> re-read the config file: gains are validated and swapped at a cycle boundary (not
+// while RUNNING: ServoController::configure restarts the controller state); every other changed
+// section is logged as needing a restart.
+// systemd: READY=1 once the drives are enabled and the loop runs; WATCHDOG=1 only while the loop's
+// cycle counter advances.
+#include <atomic>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "config/config.hpp"
+#include "daemon/axis_bus.hpp"
+#include "daemon/command_server.hpp"
+#include "daemon/event_log.hpp"
+#include "daemon/planner.hpp"
+#include "daemon/rt_timing.hpp"
+#include "daemon/servo_loop.hpp"
+#include "daemon/telemetry.hpp"
+
+namespace contour::daemon {
+
+struct DaemonOptions {
+  std::string config_path;
+  std::optional<std::string> socket_path;  // --socket overrides socket.path
+};
+
+// "${VAR:-default}" / "${VAR}" expansion for paths in the config (socket.path, telemetry.directory).
+std::string expand_env(const std::string& s);
+
+class Daemon {
+ public:
+  Daemon(config::Config cfg, DaemonOptions opt);
+  ~Daemon();
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  // Runs until shutdown (signal or `shutdown` command). Returns the process exit code.
+  int run();
+  void request_shutdown() { shutdown_.store(true); }
+
+  // Command socket handler (daemon/commands.cpp). Throws CommandError for error replies.
+  nlohmann::json handle(const nlohmann::json& req, const ClientInfo& client);
+
+ private:
+  struct JobRecord {
+    std::shared_ptr<ProgramJob> job;
+    std::string name;
+    std::vector<std::string> faults;
+    std::uint64_t overruns_at_start = 0;
+  };
+  void start_components();
+  void stop_components();
+  void controlled_shutdown();
+  void reload_config();
+  void on_event(const RtEvent& e, const std::string& text);
+  void free_released_jobs();
+  nlohmann::json status_json();
+  nlohmann::json result_json(std::uint64_t job);
+  MachineState post_and_wait(const LoopCommand& c, MachineState from, double timeout_s);
+  nlohmann::json cmd_load(const nlohmann::json& req);
+  nlohmann::json cmd_gains(const nlohmann::json& req);
+  nlohmann::json cmd_jog(const nlohmann::json& req);
+  nlohmann::json cmd_set_position(const nlohmann::json& req);
+  nlohmann::json cmd_record(const nlohmann::json& req);
+
+  config::Config cfg_;
+  DaemonOptions opt_;
+  std::unique_ptr<AxisBus> bus_;
+  std::unique_ptr<ServoLoop> loop_;
+  std::unique_ptr<TelemetryWriter> writer_;
+  std::unique_ptr<EventLogger> logger_;
+  std::unique_ptr<ProgramPlanner> planner_;
+  std::unique_ptr<CommandServer> server_;
+  RtThread rt_;
+  RtSetupReport rt_report_;
+  std::atomic<bool> rt_stop_{false};
+  std::atomic<bool> shutdown_{false};
+
+  std::mutex jobs_mu_;  // command thread vs logger thread
+  std::map<std::uint64_t, JobRecord> jobs_;
+  std::uint64_t next_job_ = 1;
+  std::uint64_t loaded_job_ = 0;
+  std::vector<std::string> recent_faults_;
+};
+
+}  // namespace contour::daemon

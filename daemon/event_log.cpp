@@ -1,0 +1,146 @@
+#include "daemon/event_log.hpp"
+
+#include <spdlog/async.h>
+#include <spdlog/pattern_formatter.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <memory>
+#include <sstream>
+
+namespace contour::daemon {
+
+namespace {
+
+// "<N>" syslog priority prefix for journald (sd-daemon.h SD_ERR etc.).
+class SyslogPrefix final : public spdlog::custom_flag_formatter {
+ public:
+  void format(const spdlog::details::log_msg& msg, const std::tm&,
+              spdlog::memory_buf_t& dest) override {
+    int pri = 6;
+    switch (msg.level) {
+      case spdlog::level::trace:
+      case spdlog::level::debug: pri = 7; break;
+      case spdlog::level::info: pri = 6; break;
+      case spdlog::level::warn: pri = 4; break;
+      case spdlog::level::err: pri = 3; break;
+      case spdlog::level::critical: pri = 2; break;
+      default: pri = 6; break;
+    }
+    const char buf[3] = {'<', static_cast<char>('0' + pri), '>'};
+    dest.append(buf, buf + 3);
+  }
+  [[nodiscard]] std::unique_ptr<custom_flag_formatter> clone() const override {
+    return std::make_unique<SyslogPrefix>();
+  }
+};
+
+}  // namespace
+
+void setup_logging(const config::LogConfig& cfg) {
+  if (spdlog::get("contourd")) return;
+  spdlog::init_thread_pool(8192, 1);
+  auto sink = std::make_shared<spdlog::sinks::stderr_color_sink_mt>(
+      cfg.journald_format ? spdlog::color_mode::never : spdlog::color_mode::automatic);
+  auto logger = std::make_shared<spdlog::async_logger>("contourd", sink, spdlog::thread_pool(),
+                                                       spdlog::async_overflow_policy::block);
+  if (cfg.journald_format) {
+    auto f = std::make_unique<spdlog::pattern_formatter>();
+    f->add_flag<SyslogPrefix>('*').set_pattern("%*%v");
+    logger->set_formatter(std::move(f));
+  } else {
+    logger->set_pattern("%Y-%m-%d %H:%M:%S.%e %^%l%$ %v");
+  }
+  logger->set_level(spdlog::level::from_str(cfg.level));
+  logger->flush_on(spdlog::level::warn);
+  spdlog::set_default_logger(logger);
+}
+
+std::string_view to_string(CommandKind k) noexcept {
+  switch (k) {
+    case CommandKind::kEnable: return "enable";
+    case CommandKind::kDisable: return "disable";
+    case CommandKind::kRun: return "run";
+    case CommandKind::kHold: return "hold";
+    case CommandKind::kResume: return "resume";
+    case CommandKind::kStop: return "stop";
+    case CommandKind::kEstop: return "estop";
+    case CommandKind::kReset: return "reset";
+    case CommandKind::kJog: return "jog";
+    case CommandKind::kAttachJob: return "load";
+    case CommandKind::kSetOverride: return "override";
+    case CommandKind::kRecordFlag: return "record";
+    case CommandKind::kSetPosition: return "set-position";
+  }
+  return "?";
+}
+
+std::string describe(const RtEvent& e) {
+  std::ostringstream o;
+  o << "cycle " << e.cycle << ": ";
+  switch (e.kind) {
+    case EventKind::kTransition:
+      o << "state " << to_string(e.from) << " -> " << to_string(e.to);
+      if (e.cause != FaultCause::kNone) o << " (cause " << to_string(e.cause) << ')';
+      break;
+    case EventKind::kFault:
+      o << "FAULT " << to_string(e.cause);
+      if (e.axis >= 0) o << " axis " << e.axis;
+      if (e.cause == FaultCause::kFollowingError || e.cause == FaultCause::kContourError) {
+        o << ": " << e.value << " mm > limit " << e.limit << " mm";
+      } else if (e.cause == FaultCause::kSoftLimit) {
+        o << ": reference " << e.value << " mm beyond limit " << e.limit << " mm";
+      } else if (e.cause == FaultCause::kMissedTpdo) {
+        o << ": " << e.value << " missed TPDOs in a row";
+      }
+      break;
+    case EventKind::kUnderrun: o << "segment queue underrun: feed hold on the path at "
+                                 << e.value << " mm"; break;
+    case EventKind::kUnderrunEnd: o << "segment queue refilled: motion continues"; break;
+    case EventKind::kProgramDone: o << "program " << e.job << " done"; break;
+    case EventKind::kProgramAborted: o << "program " << e.job << " ended early (stop/fault/estop)"; break;
+    case EventKind::kGainsSwapped: o << "gains generation " << e.value << " active"; break;
+    case EventKind::kCommandRefused:
+      o << "command '" << to_string(e.command) << "' refused in state " << to_string(e.from);
+      break;
+  }
+  return o.str();
+}
+
+EventLogger::EventLogger(SpscRing<RtEvent>& ring, Observer obs) : ring_(ring), obs_(std::move(obs)) {}
+
+EventLogger::~EventLogger() { stop(); }
+
+void EventLogger::start() {
+  running_ = true;
+  thread_ = std::thread([this] {
+    while (running_.load(std::memory_order_acquire)) {
+      drain();
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    drain();
+  });
+}
+
+void EventLogger::stop() {
+  if (running_.exchange(false) && thread_.joinable()) thread_.join();
+}
+
+void EventLogger::drain() {
+  RtEvent e;
+  while (ring_.pop(e)) {
+    const std::string text = describe(e);
+    if (e.kind == EventKind::kFault) {
+      spdlog::error("{}", text);
+    } else if (e.kind == EventKind::kCommandRefused || e.kind == EventKind::kUnderrun ||
+               e.kind == EventKind::kProgramAborted) {
+      spdlog::warn("{}", text);
+    } else {
+      spdlog::info("{}", text);
+    }
+    if (obs_) obs_(e, text);
+  }
+}
+
+}  // namespace contour::daemon

@@ -1,0 +1,607 @@
+#include "daemon/servo_loop.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <thread>
+
+namespace contour::daemon {
+
+namespace {
+
+constexpr double kInPositionMm = 0.002;       // program end: tool within 2 um (4 BLU) of the end
+constexpr double kSettleTimeoutS = 5.0;       // then end anyway (the end error is in the status)
+constexpr int kMaxCommandsPerCycle = 16;
+constexpr int kMaxSegmentsPerCycle = 64;
+
+control::ServoParams servo_params_from(const config::Config& cfg) {
+  std::array<control::FeedDriveParams, 3> dp{};
+  int delay = 0;
+  const int axes = static_cast<int>(cfg.machine.axes.size());
+  for (std::size_t i = 0; i < cfg.machine.axes.size() && i < 3; ++i) {
+    dp[i] = cfg.machine.axes[i].drive;
+    dp[i].period_s = cfg.machine.period_s;
+    delay = std::max(delay, dp[i].delay_cycles);
+  }
+  return config::make_servo_params(cfg.control, cfg.control.controller, dp, axes,
+                                   cfg.machine.period_s, delay);
+}
+
+}  // namespace
+
+SegmentRecord to_record(const control::PlannedSegment& s) noexcept {
+  SegmentRecord r;
+  r.kind = s.kind;
+  r.start_cycle = s.start_cycle;
+  r.samples = s.samples;
+  for (int i = 0; i < 3; ++i) {
+    r.start_mm[static_cast<std::size_t>(i)] = s.start_mm[i];
+    r.end_mm[static_cast<std::size_t>(i)] = s.end_mm[i];
+  }
+  r.length_mm = s.length_mm;
+  r.path_start_mm = s.path_start_mm;
+  r.feed_mm_min = s.feed_mm_min;
+  r.line = s.line;
+  r.spindle = s.spindle;
+  r.spindle_rpm = s.spindle_rpm;
+  r.mist = s.mist;
+  r.flood = s.flood;
+  r.tool = s.tool;
+  r.message_id = s.message_id;
+  return r;
+}
+
+void from_record(const SegmentRecord& r, control::PlannedSegment& s) noexcept {
+  s.kind = r.kind;
+  s.start_cycle = r.start_cycle;
+  s.samples = r.samples;
+  for (int i = 0; i < 3; ++i) {
+    s.start_mm[i] = r.start_mm[static_cast<std::size_t>(i)];
+    s.end_mm[i] = r.end_mm[static_cast<std::size_t>(i)];
+  }
+  s.length_mm = r.length_mm;
+  s.path_start_mm = r.path_start_mm;
+  s.feed_mm_min = r.feed_mm_min;
+  s.line = r.line;
+  s.spindle = r.spindle;
+  s.spindle_rpm = r.spindle_rpm;
+  s.mist = r.mist;
+  s.flood = r.flood;
+  s.tool = r.tool;
+  s.message_id = r.message_id;
+}
+
+ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_capacity)
+    : cfg_(cfg),
+      bus_(bus),
+      commands_(256),
+      events_(event_capacity),
+      telemetry_(static_cast<std::size_t>(cfg.telemetry.ring_capacity)) {
+  axes_ = static_cast<int>(cfg.machine.axes.size());
+  if (axes_ < 1 || axes_ > 3) throw std::invalid_argument("servo loop: 1 to 3 axes");
+  period_s_ = cfg.machine.period_s;
+  for (std::size_t i = 0; i < 3; ++i) {
+    if (i < cfg.machine.axes.size()) {
+      const auto& a = cfg.machine.axes[i];
+      gain_per_s_[i] = a.drive.gain_per_s;
+      vmax_mm_s_[i] = a.max_velocity_mm_min / 60.0;
+      min_mm_[i] = a.min_mm;
+      max_mm_[i] = a.max_mm;
+    } else {
+      min_mm_[i] = -1e300;
+      max_mm_[i] = 1e300;
+      vmax_mm_s_[i] = 1.0;
+    }
+  }
+  active_params_ = servo_params_from(cfg);
+  ctrl_.configure(active_params_);
+  staged_ctrl_ = ctrl_;
+  model_.configure(config::make_model_params(cfg.control));
+  publish();
+}
+
+bool ServoLoop::post(const LoopCommand& c) {
+  std::lock_guard lk(producer_mu_);
+  return commands_.push(c);
+}
+
+std::uint64_t ServoLoop::stage_gains(const control::ServoParams& p) {
+  control::ServoController check;
+  check.configure(p);  // throws std::invalid_argument
+  std::lock_guard lk(producer_mu_);
+  // Wait for the loop to take the previously staged set (one cycle); bounded.
+  for (int i = 0; i < 2000 && staged_ready_.load(std::memory_order_acquire); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  if (staged_ready_.load(std::memory_order_acquire)) {
+    throw std::runtime_error("servo loop is not running: previous gains still staged");
+  }
+  staged_ctrl_ = check;
+  staged_params_ = p;
+  const std::uint64_t gen = staged_generation_.load(std::memory_order_relaxed) + 1;
+  staged_generation_.store(gen, std::memory_order_relaxed);
+  staged_ready_.store(true, std::memory_order_release);
+  return gen;
+}
+
+void ServoLoop::emit(EventKind k, FaultCause c, int axis, double value, double limit) noexcept {
+  RtEvent e;
+  e.cycle = cycle_;
+  e.kind = k;
+  e.from = sm_.state();
+  e.to = sm_.state();
+  e.cause = c;
+  e.axis = axis;
+  e.value = value;
+  e.limit = limit;
+  e.job = job_ != nullptr ? job_->id : 0;
+  events_.push(e);
+}
+
+void ServoLoop::transition(const Transition& t, FaultCause cause) noexcept {
+  if (!t.accepted || t.from == t.to) return;
+  RtEvent e;
+  e.cycle = cycle_;
+  e.kind = EventKind::kTransition;
+  e.from = t.from;
+  e.to = t.to;
+  e.cause = cause;
+  e.job = job_ != nullptr ? job_->id : 0;
+  events_.push(e);
+}
+
+void ServoLoop::raise_fault(FaultCause c, int axis, double value, double limit) noexcept {
+  const Transition t = sm_.fault(c);
+  if (!t.accepted) return;
+  fault_axis_ = axis;
+  fault_value_ = value;
+  fault_limit_ = limit;
+  emit(EventKind::kFault, c, axis, value, limit);
+  transition(t, c);
+  if (job_ != nullptr) detach_job(false);
+  jogging_ = false;
+}
+
+void ServoLoop::detach_job(bool ok) noexcept {
+  if (job_ == nullptr) return;
+  if (!ok) job_->abort.store(true, std::memory_order_release);
+  finished_job_ = job_->id;
+  finished_ok_ = ok;
+  finished_cycle_ = cycle_;
+  released_job_ = job_->id;
+  events_.push(RtEvent{cycle_, ok ? EventKind::kProgramDone : EventKind::kProgramAborted,
+                       sm_.state(), sm_.state(), FaultCause::kNone, CommandKind::kStop, -1,
+                       iout_.path_progress_mm, 0.0, job_->id});
+  job_ = nullptr;
+  stopping_ = false;
+  settling_ = false;
+  underrun_ = false;
+}
+
+void ServoLoop::hold_here() noexcept {
+  ref_ = act_;
+  ref_prev_ = act_;
+  ctrl_.reset();
+  model_.reset();
+  v_cmd_.fill(0.0);
+  jogging_ = false;
+}
+
+void ServoLoop::apply_command(const LoopCommand& c) noexcept {
+  const MachineState st = sm_.state();
+  auto refuse = [&]() {
+    RtEvent e;
+    e.cycle = cycle_;
+    e.kind = EventKind::kCommandRefused;
+    e.from = e.to = st;
+    e.command = c.kind;
+    events_.push(e);
+  };
+  switch (c.kind) {
+    case CommandKind::kEnable:
+      transition(sm_.apply(Request::kEnable), FaultCause::kNone);
+      break;
+    case CommandKind::kDisable:
+      transition(sm_.apply(Request::kDisable), FaultCause::kNone);
+      break;
+    case CommandKind::kAttachJob:
+      if (st == MachineState::kRunning || st == MachineState::kHold || c.job == nullptr) {
+        refuse();
+        if (c.job != nullptr) released_job_ = c.job->id;
+        break;
+      }
+      if (job_ != nullptr) detach_job(false);
+      job_ = c.job;
+      settling_ = stopping_ = underrun_ = false;
+      break;
+    case CommandKind::kRun:
+      if (st != MachineState::kReady || job_ == nullptr || jogging_) {
+        refuse();
+        break;
+      }
+      model_.reset();
+      ctrl_.reset();
+      iout_ = control::InterpOutput{};
+      transition(sm_.apply(Request::kRun), FaultCause::kNone);
+      break;
+    case CommandKind::kHold:
+      transition(sm_.apply(Request::kHold), FaultCause::kNone);
+      break;
+    case CommandKind::kResume:
+      if (stopping_) {
+        refuse();
+        break;
+      }
+      if (st == MachineState::kHold && job_ != nullptr) job_->interp.resume();
+      transition(sm_.apply(Request::kResume), FaultCause::kNone);
+      break;
+    case CommandKind::kStop:
+      if ((st == MachineState::kRunning || st == MachineState::kHold) && job_ != nullptr) {
+        stopping_ = true;
+        job_->abort.store(true, std::memory_order_release);
+        transition(sm_.apply(Request::kStop), FaultCause::kNone);
+      } else if (jogging_) {
+        // Brake the jog at the axis deceleration.
+        const auto a = static_cast<std::size_t>(jog_axis_);
+        const double dec = cfg_.machine.axes[a].max_accel_mm_s2;
+        const double dir = jog_target_mm_ >= ref_[jog_axis_] ? 1.0 : -1.0;
+        jog_target_mm_ = ref_[jog_axis_] + dir * jog_speed_mm_s_ * jog_speed_mm_s_ / (2.0 * dec);
+      } else if (job_ != nullptr && st == MachineState::kReady) {
+        detach_job(false);  // unload a program that was never started
+      }
+      break;
+    case CommandKind::kEstop: {
+      const Transition t = sm_.estop(FaultCause::kEstopCommand);
+      if (t.accepted) {
+        emit(EventKind::kFault, FaultCause::kEstopCommand);
+        transition(t, FaultCause::kEstopCommand);
+        if (job_ != nullptr) detach_job(false);
+        jogging_ = false;
+        v_cmd_.fill(0.0);
+      }
+      break;
+    }
+    case CommandKind::kReset: {
+      bool gone = !fb_.heartbeat_lost && !fb_.bus_error;
+      for (int i = 0; i < axes_; ++i) gone = gone && !fb_.axis[static_cast<std::size_t>(i)].fault;
+      const Transition t = sm_.reset(gone);
+      if (!t.accepted) {
+        refuse();
+        break;
+      }
+      transition(t, FaultCause::kNone);
+      fault_axis_ = -1;
+      fault_value_ = fault_limit_ = 0.0;
+      missed_streak_.fill(0);
+      transition(sm_.apply(Request::kEnable), FaultCause::kNone);
+      break;
+    }
+    case CommandKind::kJog: {
+      if (st != MachineState::kReady || c.axis < 0 || c.axis >= axes_ || !(c.a > 0.0) ||
+          !std::isfinite(c.b)) {
+        refuse();
+        break;
+      }
+      jogging_ = true;
+      jog_axis_ = c.axis;
+      jog_v_mm_s_ = c.a;
+      jog_speed_mm_s_ = 0.0;
+      jog_target_mm_ = ref_[c.axis] + c.b;
+      break;
+    }
+    case CommandKind::kSetOverride:
+      feed_override_ = std::clamp(c.a, 0.0, cfg_.interpolator.feed_override_max_percent / 100.0);
+      break;
+    case CommandKind::kRecordFlag:
+      recording_ = c.a != 0.0;
+      break;
+    case CommandKind::kSetPosition:
+      // SimBus::set_position only resets a plant state (no allocation); a CANopen bus would do it
+      // with SDOs and must not be called here (its adapter refuses: returns false).
+      if ((st != MachineState::kReady && st != MachineState::kDisabled) || job_ != nullptr ||
+          jogging_ || c.axis < 0 || c.axis >= axes_ || !bus_.set_position(c.axis, c.a)) {
+        refuse();
+        break;
+      }
+      act_[c.axis] = c.a;
+      hold_here();
+      break;
+  }
+}
+
+void ServoLoop::cycle() noexcept {
+  // 1. Cycle boundary: the staged gains.
+  if (staged_ready_.load(std::memory_order_acquire)) {
+    ctrl_ = staged_ctrl_;
+    active_params_ = staged_params_;
+    gains_generation_ = staged_generation_.load(std::memory_order_relaxed);
+    gains_cycle_ = cycle_;
+    staged_ready_.store(false, std::memory_order_release);
+    emit(EventKind::kGainsSwapped, FaultCause::kNone, -1, static_cast<double>(gains_generation_));
+  }
+
+  // 2. SYNC and TPDOs.
+  bus_.begin_cycle();
+  bus_.read(fb_);
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    if (fb_.axis[a].fresh) {
+      act_[i] = fb_.axis[a].position_mm;
+      missed_streak_[a] = 0;
+    } else {
+      ++missed_streak_[a];
+      ++missed_tpdos_;
+    }
+  }
+
+  // Commands after the TPDOs, so that `reset` judges the drives' current fault bits.
+  LoopCommand c;
+  for (int n = 0; n < kMaxCommandsPerCycle && commands_.pop(c); ++n) apply_command(c);
+
+  MachineState st = sm_.state();
+  const bool motion = st == MachineState::kReady || st == MachineState::kRunning ||
+                      st == MachineState::kHold;
+
+  // 4. Reference.
+  ref_prev_ = ref_;
+  control::InterpStatus ist = control::InterpStatus::kIdle;
+  if (st == MachineState::kEnabling) {
+    bool all = true;
+    for (int i = 0; i < axes_; ++i) all = all && fb_.axis[static_cast<std::size_t>(i)].enabled;
+    if (all) {
+      hold_here();
+      transition(sm_.apply(Request::kEnabled), FaultCause::kNone);
+      st = sm_.state();
+    }
+  }
+  if (job_ != nullptr) {
+    SegmentRecord rec;
+    for (int n = 0; n < kMaxSegmentsPerCycle && job_->interp.free_slots() > 0 &&
+                    job_->queue.pop(rec);
+         ++n) {
+      from_record(rec, seg_);
+      job_->interp.push(seg_);
+    }
+  }
+  if (job_ != nullptr && (st == MachineState::kRunning || st == MachineState::kHold)) {
+    const double ovr = (st == MachineState::kRunning && !stopping_) ? feed_override_ : 0.0;
+    ist = job_->interp.step(ovr, iout_);
+    ref_ = iout_.position_mm;
+    const bool planner_done = job_->planner_done.load(std::memory_order_acquire);
+    if (ist == control::InterpStatus::kStarved && !planner_done) {
+      if (!underrun_) {
+        underrun_ = true;
+        ++underruns_;
+        emit(EventKind::kUnderrun, FaultCause::kQueueUnderrun, -1, iout_.path_progress_mm);
+      }
+    } else if (underrun_ && ist == control::InterpStatus::kRunning) {
+      underrun_ = false;
+      emit(EventKind::kUnderrunEnd);
+    }
+    if (job_->planner_failed.load(std::memory_order_acquire) && !stopping_) {
+      stopping_ = true;
+      transition(sm_.apply(Request::kStop), FaultCause::kNone);
+    }
+    if (ist == control::InterpStatus::kHolding && st == MachineState::kRunning) {
+      transition(sm_.apply(Request::kHold), FaultCause::kNone);  // M0/M1/M6
+    }
+    const bool stationary = iout_.override_applied <= 0.0 ||
+                            ist == control::InterpStatus::kHolding ||
+                            ist == control::InterpStatus::kStarved ||
+                            ist == control::InterpStatus::kDone;
+    if (stopping_ && stationary) {
+      detach_job(false);
+      transition(sm_.apply(Request::kStopped), FaultCause::kNone);
+    } else if (ist == control::InterpStatus::kDone ||
+               (ist == control::InterpStatus::kStarved && planner_done &&
+                job_->queue.size() == 0)) {
+      if (!settling_) {
+        settling_ = true;
+        settle_cycles_ = 0;
+      }
+    }
+  } else if (jogging_ && st == MachineState::kReady) {
+    const auto a = static_cast<std::size_t>(jog_axis_);
+    const double acc = cfg_.machine.axes[a].max_accel_mm_s2;
+    const double rem = jog_target_mm_ - ref_[jog_axis_];
+    const double dir = rem >= 0.0 ? 1.0 : -1.0;
+    const double v_brake = std::sqrt(2.0 * acc * std::abs(rem));
+    const double v_des = std::min({jog_v_mm_s_, v_brake, vmax_mm_s_[a]});
+    jog_speed_mm_s_ = std::min(v_des, jog_speed_mm_s_ + acc * period_s_);
+    const double step = std::min(jog_speed_mm_s_ * period_s_, std::abs(rem));
+    ref_[jog_axis_] += dir * step;
+    if (std::abs(jog_target_mm_ - ref_[jog_axis_]) < 1e-9) {
+      ref_[jog_axis_] = jog_target_mm_;
+      jogging_ = false;
+    }
+  } else if (!motion) {
+    ref_ = act_;
+  }
+
+  // 5-6. Contour-error model and controllers.
+  AxisCommands out;
+  out.mode = DriveMode::kDisabled;
+  double eps_norm = 0.0;
+  const Eigen::Vector3d v_ref = (ref_ - ref_prev_) / period_s_;
+  if (motion) {
+    const control::Vec3 p_hat = ctrl_.predict(act_);
+    model_.push_reference(ref_);
+    const control::ContourErrorResult ce = model_.update(p_hat);
+    eps_ = ce.eps;
+    eps_norm = ce.eps.norm();
+    control::Vec3 u = control::Vec3::Zero();
+    ctrl_.update(ref_, p_hat, ce, v_ref, u);
+    for (int i = 0; i < axes_; ++i) {
+      const auto a = static_cast<std::size_t>(i);
+      double v = gain_per_s_[a] * u[i];
+      if (!std::isfinite(v)) v = 0.0;
+      if (std::abs(v) > vmax_mm_s_[a]) {
+        v = std::copysign(vmax_mm_s_[a], v);
+        ++clamps_;
+      }
+      v_cmd_[a] = v;
+    }
+    out.mode = DriveMode::kEnabled;
+  } else if (st == MachineState::kFault) {
+    // Controlled stop: ramp the commanded velocity vector down at stop_decel, then disable.
+    double speed = 0.0;
+    for (int i = 0; i < axes_; ++i) speed += v_cmd_[static_cast<std::size_t>(i)] * v_cmd_[static_cast<std::size_t>(i)];
+    speed = std::sqrt(speed);
+    const double next = std::max(0.0, speed - cfg_.safety.stop_decel_mm_s2 * period_s_);
+    const double scale = speed > 0.0 ? next / speed : 0.0;
+    for (auto& v : v_cmd_) v *= scale;
+    out.mode = next > 0.0 ? DriveMode::kEnabled : DriveMode::kDisabled;
+    eps_.setZero();
+  } else if (st == MachineState::kEstop) {
+    v_cmd_.fill(0.0);
+    out.mode = DriveMode::kQuickStop;
+    eps_.setZero();
+  } else {
+    v_cmd_.fill(0.0);
+    out.mode = st == MachineState::kEnabling ? DriveMode::kEnabled : DriveMode::kDisabled;
+    eps_.setZero();
+  }
+  for (int i = 0; i < axes_; ++i) out.velocity_mm_s[static_cast<std::size_t>(i)] = v_cmd_[static_cast<std::size_t>(i)];
+
+  // 8. RPDOs.
+  bus_.write(out);
+
+  // 9. Safety checks.
+  if (st != MachineState::kDisabled && st != MachineState::kFault && st != MachineState::kEstop) {
+    for (int i = 0; i < axes_; ++i) {
+      const auto a = static_cast<std::size_t>(i);
+      if (fb_.axis[a].fault) {
+        raise_fault(FaultCause::kDriveFault, i, 1.0, 0.0);
+        break;
+      }
+      if (missed_streak_[a] >= cfg_.safety.missed_tpdo_streak) {
+        raise_fault(FaultCause::kMissedTpdo, i, missed_streak_[a], cfg_.safety.missed_tpdo_streak);
+        break;
+      }
+    }
+    if (fb_.heartbeat_lost) raise_fault(FaultCause::kHeartbeatLost, fb_.heartbeat_lost_node, 1.0, 0.0);
+    if (fb_.bus_error) raise_fault(FaultCause::kBusError, -1, 1.0, 0.0);
+  }
+  if (motion && sm_.state() != MachineState::kFault) {
+    const double fe = cfg_.safety.ferror_mm, mfe = cfg_.safety.min_ferror_mm;
+    for (int i = 0; i < axes_; ++i) {
+      const auto a = static_cast<std::size_t>(i);
+      // LinuxCNC: the allowed following error grows linearly with the commanded speed from
+      // MIN_FERROR at standstill to FERROR at the axis' maximum velocity.
+      const double band = std::min(fe, mfe + (fe - mfe) * std::abs(v_ref[i]) / vmax_mm_s_[a]);
+      const double err = std::abs(ref_[i] - act_[i]);
+      if (err > band) {
+        raise_fault(FaultCause::kFollowingError, i, err, band);
+        break;
+      }
+      if (ref_[i] < min_mm_[a] - 1e-9 || ref_[i] > max_mm_[a] + 1e-9) {
+        raise_fault(FaultCause::kSoftLimit, i, ref_[i], ref_[i] < min_mm_[a] ? min_mm_[a] : max_mm_[a]);
+        break;
+      }
+    }
+    if (eps_norm > cfg_.safety.contour_error_limit_mm) {
+      raise_fault(FaultCause::kContourError, -1, eps_norm, cfg_.safety.contour_error_limit_mm);
+    }
+  }
+
+  // Program end: once the reference has stopped, wait for the tool to arrive (in position).
+  if (settling_ && job_ != nullptr && sm_.state() == MachineState::kRunning) {
+    ++settle_cycles_;
+    double err = 0.0;
+    for (int i = 0; i < axes_; ++i) err = std::max(err, std::abs(ref_[i] - act_[i]));
+    if (err < kInPositionMm ||
+        static_cast<double>(settle_cycles_) * period_s_ > kSettleTimeoutS) {
+      detach_job(true);
+      transition(sm_.apply(Request::kDone), FaultCause::kNone);
+    }
+  }
+
+  // 10. Telemetry.
+  const int dec = std::max(1, cfg_.telemetry.decimation);
+  if (cycle_ % static_cast<std::uint64_t>(dec) == 0) {
+    TelemetrySample s;
+    s.cycle = cycle_;
+    s.t_s = static_cast<double>(cycle_) * period_s_;
+    s.job = job_ != nullptr ? job_->id : 0;
+    for (std::size_t i = 0; i < 3; ++i) {
+      s.ref_mm[i] = ref_[static_cast<Eigen::Index>(i)];
+      s.act_mm[i] = act_[static_cast<Eigen::Index>(i)];
+      s.eps_mm[i] = eps_[static_cast<Eigen::Index>(i)];
+      s.cmd_mm_s[i] = v_cmd_[i];
+    }
+    s.progress_mm = iout_.path_progress_mm;
+    s.override_applied = iout_.override_applied;
+    s.line = iout_.line;
+    s.state = sm_.state();
+    s.recording = recording_;
+    s.in_program = job_ != nullptr && (s.state == MachineState::kRunning || s.state == MachineState::kHold);
+    telemetry_.push(s);
+  }
+  publish();
+  ++cycle_;
+}
+
+void ServoLoop::publish() noexcept {
+  const std::uint64_t s0 = seq_.load(std::memory_order_relaxed);
+  seq_.store(s0 + 1, std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_release);
+  pub_.cycle = cycle_;
+  pub_.state = sm_.state();
+  pub_.cause = sm_.cause();
+  pub_.fault_axis = fault_axis_;
+  pub_.fault_value = fault_value_;
+  pub_.fault_limit = fault_limit_;
+  for (std::size_t i = 0; i < 3; ++i) {
+    pub_.ref_mm[i] = ref_[static_cast<Eigen::Index>(i)];
+    pub_.act_mm[i] = act_[static_cast<Eigen::Index>(i)];
+    pub_.cmd_mm_s[i] = v_cmd_[i];
+  }
+  pub_.eps_norm_mm = eps_.norm();
+  pub_.progress_mm = iout_.path_progress_mm;
+  pub_.line = iout_.line;
+  pub_.override_applied = iout_.override_applied;
+  pub_.feed_override = feed_override_;
+  pub_.attached_job = job_ != nullptr ? job_->id : 0;
+  pub_.finished_job = finished_job_;
+  pub_.finished_ok = finished_ok_;
+  pub_.finished_cycle = finished_cycle_;
+  pub_.released_job = released_job_;
+  pub_.underruns = underruns_;
+  pub_.missed_tpdos = missed_tpdos_;
+  pub_.velocity_clamps = clamps_;
+  pub_.gains_generation = gains_generation_;
+  pub_.gains_cycle = gains_cycle_;
+  pub_.jogging = jogging_;
+  pub_.interp_holding = iout_.status == control::InterpStatus::kHolding;
+  pub_.recording = recording_;
+  pub_.drives_enabled = fb_.axes > 0 && fb_.axis[0].enabled;
+  std::atomic_thread_fence(std::memory_order_release);
+  seq_.store(s0 + 2, std::memory_order_release);
+}
+
+LoopStatus ServoLoop::status() const noexcept {
+  LoopStatus out;
+  for (;;) {
+    const std::uint64_t s0 = seq_.load(std::memory_order_acquire);
+    if ((s0 & 1U) != 0) {
+      std::this_thread::yield();
+      continue;
+    }
+    out = pub_;
+    std::atomic_thread_fence(std::memory_order_acquire);
+    if (seq_.load(std::memory_order_relaxed) == s0) return out;
+  }
+}
+
+void ServoLoop::run(const std::atomic<bool>& stop) noexcept {
+  CycleClock clock(static_cast<std::int64_t>(cfg_.loop.period_us) * 1000);
+  clock.start();
+  while (!stop.load(std::memory_order_acquire)) {
+    const std::int64_t wake = clock.wait_next(stats_);
+    cycle();
+    clock.end_cycle(stats_, wake);
+  }
+}
+
+}  // namespace contour::daemon

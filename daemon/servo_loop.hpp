@@ -1,0 +1,260 @@
+#pragma once
+// The real-time servo cycle (architecture.md "The 1 kHz cycle", issue 9 "Real-time loop").
+//
+// ServoLoop::cycle() runs ONE cycle, in this order:
+//   1. apply queued commands and a staged gains swap (cycle boundary)
+//   2. bus.begin_cycle() (SYNC), bus.read() (TPDOs; missed ones counted)
+//   3. [force sample: not wired yet]
+//   4. drain planned segments into the interpolator, interpolator step (override ramps for
+//      hold / stop / underrun), or the jog / hold reference outside a program
+//   5. contour-error model (push R(k), update with the Smith-predicted P_hat)
+//   6. axis + coupling controllers (control/servo_controller.hpp), v = K*u, velocity clamp
+//   7. [force controller: not wired yet]
+//   8. bus.write() (RPDOs)
+//   9. safety: following error (LinuxCNC-like band), contour error, soft limits on the reference,
+//      drive fault bits, heartbeat loss, missed-TPDO streak -> FAULT with a named cause
+//  10. telemetry sample into an SPSC ring (dropped, never blocking, when full)
+// cycle() is noexcept, allocation-free and lock-free and does not log: events go to an SPSC ring
+// of fixed-size records. Budget: < 50 us at 1 kHz (measured: see daemon/README.md).
+//
+// Threads: cycle() runs on the RT thread only (or the test's thread). post() and stage_gains()
+// are called from non-RT threads (a mutex serialises producers; the RT consumer never locks).
+// status() is a seqlock read, callable from any thread.
+//
+// Units: mm, mm/s, s. Positions in machine coordinates.
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+
+#include "config/config.hpp"
+#include "control/contour_error.hpp"
+#include "control/fir_interpolator.hpp"
+#include "control/servo_controller.hpp"
+#include "daemon/axis_bus.hpp"
+#include "daemon/machine_state.hpp"
+#include "daemon/rt_timing.hpp"
+#include "daemon/spsc_ring.hpp"
+
+namespace contour::daemon {
+
+// PlannedSegment holds Eigen vectors (not trivially copyable): the planner -> loop queue carries
+// this plain record and the loop converts it back (no allocation).
+struct SegmentRecord {
+  control::SegmentKind kind = control::SegmentKind::kMotion;
+  std::int64_t start_cycle = 0;
+  std::int64_t samples = 0;
+  std::array<double, 3> start_mm{};
+  std::array<double, 3> end_mm{};
+  double length_mm = 0.0;
+  double path_start_mm = 0.0;
+  double feed_mm_min = 0.0;
+  int line = 0;
+  control::SpindleDir spindle = control::SpindleDir::kOff;
+  double spindle_rpm = 0.0;
+  bool mist = false;
+  bool flood = false;
+  int tool = 0;
+  int message_id = -1;
+};
+SegmentRecord to_record(const control::PlannedSegment& s) noexcept;
+void from_record(const SegmentRecord& r, control::PlannedSegment& s) noexcept;
+
+// A program handed to the loop: an interpolator configured off-RT and the planner's bounded
+// segment queue. Owned by the non-RT side; the loop holds a raw pointer between attach and
+// the acknowledgement (LoopStatus::attached_job / released_job).
+struct ProgramJob {
+  ProgramJob(std::uint64_t job_id, const control::InterpolatorParams& ip,
+             const Eigen::Vector3d& start_mm, std::size_t queue_capacity)
+      : id(job_id), queue(queue_capacity) {
+    interp.configure(ip, start_mm);
+  }
+  std::uint64_t id = 0;
+  control::Interpolator interp;
+  SpscRing<SegmentRecord> queue;
+  std::atomic<bool> planner_done{false};    // every segment has been pushed
+  std::atomic<bool> planner_failed{false};  // planning error: the loop stops the program
+  std::atomic<bool> abort{false};           // set by the loop/daemon: planner stops
+};
+
+enum class CommandKind : std::uint8_t {
+  kEnable, kDisable, kRun, kHold, kResume, kStop, kEstop, kReset, kJog, kAttachJob,
+  kSetOverride, kRecordFlag,
+  kSetPosition,  // axis, a = position mm; DISABLED/READY only (bus.set_position on the RT thread)
+};
+
+// Fixed-size command record (non-RT -> RT).
+struct LoopCommand {
+  CommandKind kind = CommandKind::kEnable;
+  int axis = 0;
+  double a = 0.0;  // jog: velocity mm/s; override: ratio; record: 0/1
+  double b = 0.0;  // jog: distance mm
+  ProgramJob* job = nullptr;
+};
+
+enum class EventKind : std::uint8_t {
+  kTransition, kFault, kUnderrun, kUnderrunEnd, kProgramDone, kGainsSwapped, kCommandRefused,
+  kProgramAborted,
+};
+
+// Fixed-size event record (RT -> logger thread).
+struct RtEvent {
+  std::uint64_t cycle = 0;
+  EventKind kind = EventKind::kTransition;
+  MachineState from = MachineState::kDisabled;
+  MachineState to = MachineState::kDisabled;
+  FaultCause cause = FaultCause::kNone;
+  CommandKind command = CommandKind::kEnable;
+  int axis = -1;
+  double value = 0.0;  // fault: the measured value; limit in `limit`
+  double limit = 0.0;
+  std::uint64_t job = 0;
+};
+
+// One telemetry sample (RT -> writer thread).
+struct TelemetrySample {
+  std::uint64_t cycle = 0;
+  std::uint64_t job = 0;  // 0: no program
+  double t_s = 0.0;       // cycle * period
+  std::array<double, 3> ref_mm{};
+  std::array<double, 3> act_mm{};    // measured position
+  std::array<double, 3> eps_mm{};    // model contour-error vector
+  std::array<double, 3> cmd_mm_s{};  // velocity commands
+  double progress_mm = 0.0;
+  double override_applied = 0.0;
+  int line = 0;
+  MachineState state = MachineState::kDisabled;
+  bool recording = false;
+  bool in_program = false;  // RUNNING/HOLD with a program attached
+};
+
+// Published status (seqlock).
+struct LoopStatus {
+  std::uint64_t cycle = 0;
+  MachineState state = MachineState::kDisabled;
+  FaultCause cause = FaultCause::kNone;
+  int fault_axis = -1;
+  double fault_value = 0.0;
+  double fault_limit = 0.0;
+  std::array<double, 3> ref_mm{};
+  std::array<double, 3> act_mm{};
+  std::array<double, 3> cmd_mm_s{};
+  double eps_norm_mm = 0.0;
+  double progress_mm = 0.0;
+  int line = 0;
+  double override_applied = 0.0;
+  double feed_override = 1.0;
+  std::uint64_t attached_job = 0;   // program the loop is executing (0 = none)
+  std::uint64_t finished_job = 0;   // last program that ended (done, stopped or aborted)
+  bool finished_ok = false;         // finished_job ran to its end
+  std::uint64_t finished_cycle = 0;
+  std::uint64_t released_job = 0;   // the loop no longer touches this job (may be freed)
+  std::uint64_t underruns = 0;
+  std::uint64_t missed_tpdos = 0;
+  std::uint64_t velocity_clamps = 0;
+  std::uint64_t gains_generation = 0;
+  std::uint64_t gains_cycle = 0;    // cycle at which the last gains swap took effect
+  bool jogging = false;
+  bool interp_holding = false;      // M0/M1/M6 hold in the program
+  bool recording = false;
+  bool drives_enabled = false;
+};
+
+class ServoLoop {
+ public:
+  // Setup: allocates everything the cycle needs. Throws on bad config (std::invalid_argument).
+  ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_capacity = 4096);
+
+  // One cycle (see the header comment). noexcept, no allocation, no lock, no logging.
+  void cycle() noexcept;
+
+  // RT thread body: CycleClock at loop.period_us until stop flag; fills stats().
+  void run(const std::atomic<bool>& stop) noexcept;
+
+  // Non-RT producers. post() returns false when the command ring is full.
+  bool post(const LoopCommand& c);
+  // Validates by configuring a controller (throws std::invalid_argument), then waits (up to
+  // timeout) until the previous staged set was taken and stages this one. Returns the generation.
+  std::uint64_t stage_gains(const control::ServoParams& p);
+
+  [[nodiscard]] LoopStatus status() const noexcept;
+  [[nodiscard]] CycleStats& stats() noexcept { return stats_; }
+  SpscRing<RtEvent>& events() noexcept { return events_; }
+  SpscRing<TelemetrySample>& telemetry() noexcept { return telemetry_; }
+  [[nodiscard]] const control::ServoParams& active_params() const noexcept { return active_params_; }
+  [[nodiscard]] double period_s() const noexcept { return period_s_; }
+  [[nodiscard]] int axes() const noexcept { return axes_; }
+
+ private:
+  void apply_command(const LoopCommand& c) noexcept;
+  void transition(const Transition& t, FaultCause cause) noexcept;
+  void raise_fault(FaultCause c, int axis, double value, double limit) noexcept;
+  void emit(EventKind k, FaultCause c = FaultCause::kNone, int axis = -1, double value = 0.0,
+            double limit = 0.0) noexcept;
+  void detach_job(bool ok) noexcept;
+  void hold_here() noexcept;  // reference := current measured position, controller state reset
+  void publish() noexcept;
+
+  const config::Config cfg_;
+  AxisBus& bus_;
+  int axes_ = 3;
+  double period_s_ = 0.001;
+  std::array<double, 3> gain_per_s_{};
+  std::array<double, 3> vmax_mm_s_{};
+  std::array<double, 3> min_mm_{}, max_mm_{};
+
+  StateMachine sm_;
+  control::ServoController ctrl_;
+  control::ServoParams active_params_{};
+  control::ContourErrorModel model_;
+
+  // Command mailbox and gains double buffer.
+  SpscRing<LoopCommand> commands_;
+  std::mutex producer_mu_;  // non-RT producers only
+  control::ServoController staged_ctrl_;
+  control::ServoParams staged_params_{};
+  std::atomic<bool> staged_ready_{false};
+  std::atomic<std::uint64_t> staged_generation_{0};
+
+  SpscRing<RtEvent> events_;
+  SpscRing<TelemetrySample> telemetry_;
+  CycleStats stats_;
+
+  // Cycle state.
+  std::uint64_t cycle_ = 0;
+  BusFeedback fb_{};
+  AxisCommands out_{};
+  Eigen::Vector3d ref_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d ref_prev_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d act_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d eps_ = Eigen::Vector3d::Zero();
+  std::array<double, 3> v_cmd_{};
+  ProgramJob* job_ = nullptr;
+  control::InterpOutput iout_{};
+  control::PlannedSegment seg_{};
+  double feed_override_ = 1.0;
+  bool stopping_ = false;       // stop requested: decelerate, then flush
+  bool underrun_ = false;
+  bool settling_ = false;       // interpolator done, waiting for the tool to arrive
+  std::uint64_t settle_cycles_ = 0;
+  bool jogging_ = false;
+  int jog_axis_ = 0;
+  double jog_target_mm_ = 0.0;
+  double jog_v_mm_s_ = 0.0;
+  double jog_speed_mm_s_ = 0.0;
+  bool recording_ = false;
+  std::array<int, 3> missed_streak_{};
+  int fault_axis_ = -1;
+  double fault_value_ = 0.0, fault_limit_ = 0.0;
+  std::uint64_t finished_job_ = 0, released_job_ = 0, finished_cycle_ = 0;
+  bool finished_ok_ = false;
+  std::uint64_t underruns_ = 0, missed_tpdos_ = 0, clamps_ = 0;
+  std::uint64_t gains_generation_ = 0, gains_cycle_ = 0;
+
+  // Seqlock-published status.
+  mutable std::atomic<std::uint64_t> seq_{0};
+  LoopStatus pub_{};
+};
+
+}  // namespace contour::daemon
