@@ -1,0 +1,128 @@
+#!/usr/bin/env bash
+# Benchmarks of issue 11: builds the release benchmark programs, runs them with repetitions and
+# prints a table of MEDIANS (Google Benchmark's median aggregate over the repetitions), then the
+# planner throughput on a generated 100,000-block CAM-style program.
+#
+# Usage: tools/bench.sh [--json] [--reps N] [--blocks N] [--build-dir DIR] [--no-build]
+#   --json        end with one JSON object line: cycle_ns_median, contour_model_ns_median,
+#                 planner_realtime_factor, planner_peak_rss_mb (+ machine and the other medians)
+#   --reps N      benchmark repetitions (default 5)
+#   --blocks N    G01 blocks of the generated program (default 100000)
+#   --build-dir   where the bench programs are (default build/release, built by tools/build.sh)
+#   --no-build    do not build (use what is in --build-dir)
+#
+# Times are CPU-time medians (cpu_time of the median aggregate): on this shared 2-core VM the wall
+# time of a benchmark includes other processes' time slices and steal time. Compare ratios within
+# one run, not absolute numbers across runs or machines.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+json=0
+reps=5
+blocks=100000
+build_dir=build/release
+do_build=1
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --json) json=1 ;;
+    --reps) reps=$2; shift ;;
+    --blocks) blocks=$2; shift ;;
+    --build-dir) build_dir=$2; shift ;;
+    --no-build) do_build=0 ;;
+    -h|--help) sed -n 2,17p "$0"; exit 0 ;;
+    *) echo "bench.sh: unknown option $1" >&2; exit 2 ;;
+  esac
+  shift
+done
+
+benches=(bench_cycle bench_control bench_planner bench_force bench_canopen)
+if [ "$do_build" = 1 ]; then
+  tools/build.sh release "${benches[@]}" >&2
+  build_dir=build/release
+fi
+for b in "${benches[@]}"; do
+  [ -x "$build_dir/tools/$b" ] || { echo "bench.sh: $build_dir/tools/$b not built" >&2; exit 1; }
+done
+
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+
+cpu_model=$(lscpu | awk -F: '/Model name/ {sub(/^[ \t]+/, "", $2); print $2; exit}')
+ncpu=$(nproc)
+kernel=$(uname -r)
+echo "machine: $cpu_model, $ncpu CPUs, Linux $kernel"
+echo "repetitions: $reps (median of each)"
+echo
+
+# CSV rows of the median aggregates: name,iterations,real_time,cpu_time,time_unit,...
+for b in "${benches[@]}"; do
+  "$build_dir/tools/$b" --benchmark_repetitions="$reps" --benchmark_report_aggregates_only=true \
+    --benchmark_format=csv 2>/dev/null | awk -F, -v prog="$b" '
+      $1 ~ /_median"$/ { n = $1; gsub(/"/, "", n); sub(/_median$/, "", n); print prog "," n "," $3 "," $4 "," $5 }' \
+    >>"$tmp/medians.csv"
+done
+
+to_ns() {  # value unit -> ns
+  awk -v v="$1" -v u="$2" 'BEGIN { f = (u == "us") ? 1e3 : (u == "ms") ? 1e6 : (u == "s") ? 1e9 : 1; printf "%.1f", v * f }'
+}
+median_ns() {  # prog benchmark -> cpu ns (empty if missing)
+  local row
+  row=$(awk -F, -v p="$1" -v n="$2" '$1 == p && $2 == n { print $4 " " $5; exit }' "$tmp/medians.csv")
+  [ -n "$row" ] && to_ns $row
+}
+
+printf '%-14s %-34s %14s %14s\n' program benchmark "cpu median" "wall median"
+awk -F, '{ printf "%-14s %-34s %11.1f %-2s %11.1f %-2s\n", $1, $2, $4, $5, $3, $5 }' "$tmp/medians.csv"
+echo
+
+# ---- planner throughput: generated CAM-style program, streamed through parser + planner.
+prog="$tmp/cam_${blocks}.ngc"
+awk -v n="$blocks" -v lenfile="$tmp/len" 'BEGIN {
+  srand(11);
+  print "%"; print "(generated CAM-style program: short G01 chords at 4 m/min, G64 P0.02)";
+  print "G17 G21 G90 G94"; print "G64 P0.02"; print "G1 F4000";
+  x = 0; y = 0; z = 0; h = 0; len = 0;
+  for (i = 0; i < n; i++) {
+    h += 0.6 * (rand() - 0.5);
+    l = 0.1 + 0.9 * rand();        # 0.1..1.0 mm chords, mean 0.55 mm
+    nx = x + l * cos(h); ny = y + l * sin(h); nz = 0.5 * sin(0.001 * i);
+    len += sqrt((nx - x) ^ 2 + (ny - y) ^ 2 + (nz - z) ^ 2); x = nx; y = ny; z = nz;
+    printf "G1 X%.4f Y%.4f Z%.4f\n", x, y, z;
+  }
+  print "M2"; print "%";
+  printf "%.3f\n", len > lenfile;
+}' >"$prog"
+plan_json=$(/usr/bin/time -f '%M' -o "$tmp/rss_kb" "$build_dir/tools/bench_cycle" --plan-file "$prog")
+rss_kb=$(cat "$tmp/rss_kb")
+rtf=$(sed -n 's/.*"realtime_factor":\([0-9.]*\).*/\1/p' <<<"$plan_json")
+program_s=$(sed -n 's/.*"program_s":\([0-9.]*\).*/\1/p' <<<"$plan_json")
+wall_s=$(sed -n 's/.*"wall_s":\([0-9.]*\).*/\1/p' <<<"$plan_json")
+rss_mb=$(awk -v k="$rss_kb" 'BEGIN { printf "%.1f", k / 1024 }')
+echo "planner: $blocks blocks ($(wc -c <"$prog") bytes), program time ${program_s} s, planning wall ${wall_s} s"
+echo "planner: realtime factor ${rtf}x (target >= 100x), peak RSS ${rss_mb} MB (target <= 64 MB)"
+path_mm=$(cat "$tmp/len")
+feed_s=$(awk -v l="$path_mm" 'BEGIN { printf "%.1f", l / 4000 * 60 }')
+feed_rtf=$(awk -v f="$feed_s" -v w="$wall_s" 'BEGIN { printf "%.1f", f / w }')
+echo "planner: path ${path_mm} mm = ${feed_s} s at the programmed 4 m/min -> ${feed_rtf}x on pure feed time (the planned time is longer: tolerance-limited corners slow down)"
+
+cycle=$(median_ns bench_cycle BM_Cycle3Axis)
+plant=$(median_ns bench_cycle BM_PlantOnly)
+model=$(median_ns bench_cycle BM_ContourModel)
+model_eq11=$(median_ns bench_control BM_ModelOnly)
+window=$(median_ns bench_control BM_WindowUpdate)
+pdo_cycle=$(median_ns bench_canopen BM_PdoCycle3Axis)
+pdo_pack=$(median_ns bench_canopen BM_PdoPack)
+pdo_unpack=$(median_ns bench_canopen BM_PdoUnpack)
+echo "cycle (3 axes, incl. plant ${plant} ns): ${cycle} ns median (target <= 2000 ns)"
+
+if [ "$json" = 1 ]; then
+  printf '{"cycle_ns_median":%s,"contour_model_ns_median":%s,"planner_realtime_factor":%s,"planner_peak_rss_mb":%s,' \
+    "${cycle:-null}" "${model:-null}" "${rtf:-null}" "${rss_mb:-null}"
+  printf '"plant_ns_median":%s,"contour_model_eq11_ns_median":%s,"window_update_ns_median":%s,' \
+    "${plant:-null}" "${model_eq11:-null}" "${window:-null}"
+  printf '"pdo_cycle_3axis_ns_median":%s,"pdo_pack_ns_median":%s,"pdo_unpack_ns_median":%s,' \
+    "${pdo_cycle:-null}" "${pdo_pack:-null}" "${pdo_unpack:-null}"
+  printf '"planner_blocks":%s,"planner_program_s":%s,"planner_wall_s":%s,"planner_path_mm":%s,"planner_feed_time_s":%s,"planner_feed_realtime_factor":%s,' "$blocks" "$program_s" "$wall_s" "$path_mm" "$feed_s" "$feed_rtf"
+  printf '"repetitions":%s,"machine":{"cpu":"%s","nproc":%s,"kernel":"%s"}}\n' \
+    "$reps" "$cpu_model" "$ncpu" "$kernel"
+fi
