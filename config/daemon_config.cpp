@@ -47,8 +47,9 @@ SocketConfig parse_socket(Section& s) {
     // Accept "0660" (octal string) or a number written in octal digits (660 / 0660).
     const std::string m = s.string("mode", "0660");
     int v = 0;
-    bool ok = !m.empty() && m.size() <= 4;
-    for (char ch : m) {
+    bool ok = !m.empty() && m.size() <= 4;  // checked before the loop: no int overflow
+    for (std::size_t i = 0; ok && i < m.size(); ++i) {
+      const char ch = m[i];
       if (ch < '0' || ch > '7') ok = false;
       v = v * 8 + (ch - '0');
     }

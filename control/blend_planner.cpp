@@ -126,6 +126,12 @@ void BlendPlanner::add_move(const Block& b, const Eigen::Vector3d& a, const Eige
   if (!(f > 0.0)) f = 1e-6;
   m.feed_mm_min = f;
   const double x = len / (f / 60.0 * p_.period_s);
+  // A move of more than ~31 years at its feed is not a real program (e.g. Y1e65 or a vanishing
+  // feed); refuse it before the sample count overflows int64 (fuzz regression-1).
+  if (!(x < 1e12)) {
+    throw std::invalid_argument("line " + std::to_string(b.line) + ": move of " + std::to_string(len) +
+                                " mm at " + std::to_string(f) + " mm/min is too long to interpolate");
+  }
   m.n = p_.floor_rounding ? std::max<std::int64_t>(1, static_cast<std::int64_t>(std::floor(x + 1e-9)))
                           : std::max<std::int64_t>(1, static_cast<std::int64_t>(std::ceil(x - 1e-9)));
   m.path_start = path_mm_;

@@ -6,7 +6,7 @@ set -euo pipefail
 
 PACKAGES=(
   # build
-  build-essential cmake ninja-build pkg-config g++ clang-14
+  build-essential cmake ninja-build pkg-config g++ clang-14 libclang-rt-14-dev
   # libraries (Debian packages only)
   libeigen3-dev libyaml-cpp-dev libspdlog-dev libfmt-dev libmodbus-dev libgpiod-dev
   libsystemd-dev libcli11-dev nlohmann-json3-dev libmuparser-dev
@@ -15,7 +15,7 @@ PACKAGES=(
   # vcan harness (tools/with-vcan): User-Mode Linux kernel + its CAN modules, insmod, ip
   user-mode-linux kmod iproute2 can-utils
   # plots, latency comparison, independent Modbus client, systemd unit check
-  gnuplot-nox rt-tests mbpoll systemd
+  gnuplot-nox rt-tests mbpoll systemd time
 )
 
 missing=()
