@@ -1,32 +1,55 @@
 #!/usr/bin/env bash
-# The main job: install what is missing, build, run the paper's Table 2 part program
-# (config/programs/table2.ngc, F4000 = 4 m/min) on the built-in simulated machine (Table 1 drives,
-# one cycle of CANopen transport delay), coupled (CCC) and uncoupled (P, PID), and print a table.
-#
-# Status, said plainly: the real-time daemon (contourd) and its client (contourctl) are not finished
-# yet. Until they are, this demo runs the same control library through the offline simulator
-# `contour-sim`, which is deterministic and uses the same plant code as the daemon's simulated bus.
+# The main job: install what is missing, build, start contourd on the built-in simulated machine
+# (config/sim.yaml: Table 1 drives, one cycle of CANopen transport delay, lockstep), run the
+# paper's Table 2 part program (config/programs/table2.ngc, 4 m/min) with contourctl — coupled
+# (cross-coupled controller) and then uncoupled — stop the daemon and print a table.
+# Leaves no process behind. Output folder: build/demo (override with DEMO_OUT).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${DEMO_OUT:-build/demo}
 tools/deps.sh
-tools/build.sh release contour-sim >/dev/null
+echo "demo: building (release preset)..."
+tools/build.sh release contourd contourctl contour-sim >/dev/null
 mkdir -p "$out"
-sim=build/release/tools/contour-sim
+bin=build/release
+sock_dir=$(mktemp -d "${TMPDIR:-/tmp}/contourd-demo.XXXXXX")
+sock="$sock_dir/contourd.sock"
+ctl() { "$bin/tools/contourctl" --socket "$sock" "$@"; }
+field() { sed -nE "s/.*\"$1\": ?\"?([-0-9.eE+A-Z_]+|true|false)\"?.*/\1/p" <<<"$2" | head -n 1; }
 
-field() { sed -nE "s/.*\"$1\": ?([-0-9.eE+]+|true|false).*/\1/p" <<<"$2"; }
-
-echo "contourd demo: Table 2 program at 4 m/min on the simulated machine (offline: contour-sim)"
-printf '%-12s %12s %12s %10s %8s  %s\n' controller max_err_um rms_err_um end_err_um stable plot
-for c in ccc p pid; do
-  json=$("$sim" contour --path config/programs/table2.ngc --controller "$c" --feed-mm-min 4000 \
-    --plot "$out/table2_$c.png" --csv "$out/table2_$c.csv" | tail -n 1)
-  printf '%-12s %12.3f %12.3f %10.3f %8s  %s\n' "$c" "$(field max_contour_error_um "$json")" \
-    "$(field rms_contour_error_um "$json")" "$(field end_position_error_um "$json")" \
-    "$(field stable "$json")" "$out/table2_$c.png"
+"$bin/daemon/contourd" --config config/sim.yaml --socket "$sock" >"$out/contourd.log" 2>&1 &
+pid=$!
+cleanup() {
+  if kill -0 "$pid" 2>/dev/null; then
+    kill -TERM "$pid" 2>/dev/null || true
+    wait "$pid" 2>/dev/null || true
+  fi
+  rm -rf "$sock_dir"
+}
+trap cleanup EXIT
+for _ in $(seq 1 100); do
+  ctl status >/dev/null 2>&1 && break
+  kill -0 "$pid" 2>/dev/null || { echo "demo: contourd exited; log:"; cat "$out/contourd.log"; exit 1; }
+  sleep 0.1
 done
-"$sim" blend --program config/programs/diamond.ngc --mode limited --tolerance-um 50 \
-  --plot "$out/diamond_blend.png" | tail -n 1 >"$out/diamond_blend.json"
-echo "corner blending (seed 004 diamond, G64 P0.05): $(cat "$out/diamond_blend.json" | cut -c1-160)..."
-echo "plots and CSV files: $out/"
-echo "note: contourd/contourctl not used yet (daemon issue open); figures come from contour-sim."
+
+echo "demo: contourd running on the simulated machine (socket $sock)"
+printf '%-22s %12s %12s %10s %9s %s\n' run max_err_um rms_err_um time_s overruns state
+for mode in coupled uncoupled; do
+  if [ "$mode" = coupled ]; then ctl gains set coupling=true >/dev/null; else ctl gains set coupling=false >/dev/null; fi
+  json=$(ctl --json run config/programs/table2.ngc --wait | tail -n 1)
+  echo "$json" >"$out/table2_$mode.json"
+  printf '%-22s %12.3f %12.3f %10.3f %9s %s\n' "Table 2, $mode" "$(field max_contour_error_um "$json")" \
+    "$(field rms_contour_error_um "$json")" "$(field duration_s "$json")" "$(field overruns "$json")" \
+    "$(field state "$json")"
+done
+status=$(ctl --json status | tail -n 1)
+echo "$status" >"$out/status.json"
+ctl shutdown >/dev/null 2>&1 || true
+wait "$pid" 2>/dev/null || true
+
+# The same program offline (paper's reference without acc/dec) and its plot.
+"$bin/tools/contour-sim" contour --path config/programs/table2.ngc --compare --feed-mm-min 4000 \
+  --plot "$out/table2_compare.png" | tail -n 1 >"$out/table2_offline.json"
+echo "offline (contour-sim, paper's no-acc/dec reference): P/CCC $(field ratio_p_ccc "$(cat "$out/table2_offline.json")"), plot $out/table2_compare.png"
+echo "daemon log: $out/contourd.log; JSON results and status: $out/"

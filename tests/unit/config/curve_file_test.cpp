@@ -26,8 +26,10 @@ TEST(CurveFile, PaperCurvesLoadInMm) {
     ASSERT_TRUE(f.curve);
     // Explicit derivatives agree with central differences of x(u).
     for (double u : {0.1, 0.5, 0.9}) {
-      const auto a = f.curve->d1(u);
-      const auto b = (f.curve->point(u + 1e-6) - f.curve->point(u - 1e-6)) / 2e-6;
+      // Named Eigen types, not auto: an auto expression would keep references to the temporaries
+      // point(u +- 1e-6) past their lifetime (ASan: stack-use-after-scope).
+      const Eigen::Vector3d a = f.curve->d1(u);
+      const Eigen::Vector3d b = (f.curve->point(u + 1e-6) - f.curve->point(u - 1e-6)) / 2e-6;
       EXPECT_LT((a - b).norm(), 1e-6 * (1.0 + a.norm())) << name << " u=" << u;
     }
   }
