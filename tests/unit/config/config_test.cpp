@@ -1,4 +1,5 @@
 #include "config/config.hpp"
+#include "tests/support/config_errors.hpp"
 
 #include <gtest/gtest.h>
 
@@ -7,19 +8,9 @@ using contour::config::load_config_string;
 
 namespace {
 std::vector<std::string> errors_of(const std::string& yaml) {
-  try {
-    load_config_string(yaml, "test.yaml");
-  } catch (const ConfigError& e) {
-    return e.errors();
-  }
-  return {};
+  return contour::test::config_errors(yaml, "test.yaml");
 }
-bool any_contains(const std::vector<std::string>& v, const std::string& s) {
-  for (const auto& e : v) {
-    if (e.find(s) != std::string::npos) return true;
-  }
-  return false;
-}
+using contour::test::any_contains;
 }  // namespace
 
 TEST(Config, LoadsAxesWithDefaults) {

@@ -3,24 +3,15 @@
 #include <gtest/gtest.h>
 
 #include "config/config.hpp"
+#include "tests/support/config_errors.hpp"
 
 using namespace contour::config;
 
 namespace {
 std::vector<std::string> errors_of(const std::string& yaml) {
-  try {
-    load_config_string(yaml, "c.yaml");
-  } catch (const ConfigError& e) {
-    return e.errors();
-  }
-  return {};
+  return contour::test::config_errors(yaml, "c.yaml");
 }
-bool any_contains(const std::vector<std::string>& v, const std::string& s) {
-  for (const auto& e : v) {
-    if (e.find(s) != std::string::npos) return true;
-  }
-  return false;
-}
+using contour::test::any_contains;
 }  // namespace
 
 TEST(ControlConfig, DefaultsAreThePapersTable1) {

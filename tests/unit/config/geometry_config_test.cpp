@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "config/circle_test_config.hpp"
+#include "tests/support/config_errors.hpp"
 
 using contour::config::ConfigError;
 using contour::config::load_circle_test_config;
@@ -13,19 +14,9 @@ using contour::config::load_geometry_string;
 namespace {
 template <class F>
 std::vector<std::string> errors_of(F f) {
-  try {
-    f();
-  } catch (const ConfigError& e) {
-    return e.errors();
-  }
-  return {};
+  return contour::test::config_errors_of(f);
 }
-bool any_contains(const std::vector<std::string>& v, const std::string& s) {
-  for (const auto& e : v) {
-    if (e.find(s) != std::string::npos) return true;
-  }
-  return false;
-}
+using contour::test::any_contains;
 }  // namespace
 
 TEST(GeometryConfig, UnitsAreMicrometresAndMicroradians) {
