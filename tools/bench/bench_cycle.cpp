@@ -12,6 +12,8 @@
 // one JSON line: blocks, program_s (simulated time incl. the FIR tail), wall_s, realtime_factor,
 // peak_rss_mb (getrusage ru_maxrss of the whole process). tools/bench.sh uses it.
 #include <benchmark/benchmark.h>
+
+#include "tools/bench/plan_program.hpp"
 #include <sys/resource.h>
 
 #include <chrono>
@@ -57,21 +59,7 @@ std::vector<std::string> cam_program(int n) {
 }
 
 std::vector<PlannedSegment> plan_all(const std::vector<std::string>& prog) {
-  GcodeParser parser(ProgramSetup{}, "bench_cycle.ngc");
-  BlendPlanner planner(PlannerParams{}, Eigen::Vector3d::Zero());
-  std::vector<Block> blocks;
-  std::vector<PlannedSegment> out;
-  PlannedSegment s;
-  for (const auto& l : prog) {
-    parser.parse_line(l, blocks);
-    for (const auto& b : blocks) planner.push(b);
-    blocks.clear();
-    while (planner.pop(s)) out.push_back(s);
-  }
-  parser.finish(blocks);
-  for (const auto& b : blocks) planner.push(b);
-  while (planner.pop(s)) out.push_back(s);
-  return out;
+  return contour::bench::plan_program(prog);
 }
 
 struct CycleRig {

@@ -5,6 +5,8 @@
 //   (~tens of blocks in motion at once).
 #include <benchmark/benchmark.h>
 
+#include "tools/bench/plan_program.hpp"
+
 #include <cmath>
 #include <random>
 #include <string>
@@ -34,22 +36,7 @@ std::vector<std::string> make_program(int n) {
 }
 
 std::vector<PlannedSegment> plan(const std::vector<std::string>& prog, std::int64_t* moves) {
-  GcodeParser parser(ProgramSetup{}, "bench.ngc");
-  BlendPlanner planner(PlannerParams{}, Eigen::Vector3d::Zero());
-  std::vector<Block> blocks;
-  std::vector<PlannedSegment> out;
-  PlannedSegment s;
-  for (const auto& l : prog) {
-    parser.parse_line(l, blocks);
-    for (const auto& b : blocks) planner.push(b);
-    blocks.clear();
-    while (planner.pop(s)) out.push_back(s);
-  }
-  parser.finish(blocks);
-  for (const auto& b : blocks) planner.push(b);
-  while (planner.pop(s)) out.push_back(s);
-  *moves = planner.stats().moves;
-  return out;
+  return contour::bench::plan_program(prog, moves);
 }
 }  // namespace
 
