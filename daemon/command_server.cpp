@@ -151,7 +151,14 @@ void CommandServer::accept_clients() {
   for (;;) {
     const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
     if (fd < 0) return;
-    std::lock_guard lk(mu_);
+    std::unique_lock lk(mu_);
+    if (clients_.size() >= opt_.max_clients) {
+      // A burst of short-lived clients can fill the table with peers that have already hung up
+      // but whose hang-up this thread has not polled yet; reap those before refusing anyone.
+      lk.unlock();
+      reap_hung_up_clients();
+      lk.lock();
+    }
     if (clients_.size() >= opt_.max_clients) {
       const char* msg = "{\"ok\":false,\"error\":\"too many clients\"}\n";
       [[maybe_unused]] auto n = ::send(fd, msg, std::strlen(msg), MSG_NOSIGNAL | MSG_DONTWAIT);
@@ -170,6 +177,28 @@ void CommandServer::accept_clients() {
     }
     ++stats_.connections;
     clients_.emplace(c.info.id, std::move(c));
+  }
+}
+
+void CommandServer::reap_hung_up_clients() {
+  std::vector<std::uint64_t> ids;
+  {
+    std::lock_guard lk(mu_);
+    for (const auto& [id, c] : clients_) ids.push_back(id);
+  }
+  for (const std::uint64_t id : ids) {
+    std::unique_lock lk(mu_);
+    auto it = clients_.find(id);
+    if (it == clients_.end()) continue;
+    pollfd p{it->second.fd, static_cast<short>(POLLIN | POLLRDHUP), 0};
+    if (::poll(&p, 1, 0) != 1 || (p.revents & (POLLHUP | POLLERR | POLLRDHUP)) == 0) continue;
+    lk.unlock();
+    const bool keep = read_client(it->second);  // answers what it sent, then sees the EOF
+    lk.lock();
+    if (!keep) {
+      ::close(it->second.fd);
+      clients_.erase(it);
+    }
   }
 }
 

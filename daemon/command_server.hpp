@@ -84,6 +84,7 @@ class CommandServer {
   };
   void run();
   void accept_clients();
+  void reap_hung_up_clients();
   bool read_client(Client& c);
   bool flush_client(Client& c);
   void handle_line(Client& c, const std::string& line);
