@@ -10,7 +10,7 @@
 #include <stdexcept>
 #include <thread>
 
-#include "daemon/sim_bus.hpp"
+#include "daemon/bus_factory.hpp"
 
 namespace contour::daemon {
 
@@ -55,17 +55,7 @@ void Daemon::on_event(const RtEvent& e, const std::string& text) {
 }
 
 void Daemon::start_components() {
-  if (cfg_.bus.type != "sim") {
-    throw std::runtime_error("bus.type '" + cfg_.bus.type +
-                             "' is not wired into contourd yet (only 'sim'); see daemon/README.md");
-  }
-  std::vector<control::FeedDriveParams> drives;
-  for (const auto& a : cfg_.machine.axes) {
-    control::FeedDriveParams p = a.drive;
-    p.period_s = cfg_.machine.period_s;
-    drives.push_back(p);
-  }
-  bus_ = std::make_unique<SimBus>(drives);
+  bus_ = make_axis_bus(cfg_, [](const std::string& m) { spdlog::info("{}", m); });
   bus_->start();
   loop_ = std::make_unique<ServoLoop>(cfg_, *bus_);
   writer_ = std::make_unique<TelemetryWriter>(loop_->telemetry(), loop_->period_s());
