@@ -2,7 +2,7 @@
 # Loop timing of contourd against the kernel's limit (issue 11): runs
 #   contourd --latency-test SECONDS          (the servo loop's RT set-up without drives)
 # and
-#   cyclictest -m -t1 -p80 -i1000 -D SECONDS -q -h 20000     (Debian rt-tests; 1 ms period)
+#   cyclictest -m -t1 [-a CPU] -p80 -i1000 -D SECONDS -q -h 20000   (Debian rt-tests; 1 ms period)
 # AT THE SAME TIME (both in the background, then wait) so both see the same machine conditions,
 # prints both reports and ends with one JSON line:
 #   {"contourd_p99_us":..,"cyclictest_p99_us":..,"ratio_p99":..,...}
@@ -11,8 +11,10 @@
 # Usage: tools/latency-compare.sh [--seconds N] [--contourd PATH] [--priority P] [-- extra contourd args]
 #   --seconds N     duration of both runs (default 30)
 #   --contourd PATH the daemon binary (default build/release/daemon/contourd)
-#   --priority P    SCHED_FIFO priority of cyclictest (default 80; contourd uses its own default
-#                   unless you pass e.g. `-- --priority 80`)
+#   --priority P    SCHED_FIFO priority of both (default 80)
+#   --cpu N         pin both to CPU N (default: the last CPU; -1: no pinning). On a VM the steal
+#                   time differs between vCPUs, so two unpinned runs can see different machines;
+#                   on one CPU both see the same one (their 1 ms wake-ups cost each other a few us).
 # Needs root (or CAP_SYS_NICE + memlock limits) for SCHED_FIFO and mlockall; without it both
 # tools fall back / fail and the numbers are not RT numbers.
 #
@@ -25,14 +27,16 @@ cd "$(dirname "$0")/.."
 seconds=30
 contourd=build/release/daemon/contourd
 prio=80
+cpu=$(( $(nproc) - 1 ))
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --seconds) seconds=$2; shift ;;
     --contourd) contourd=$2; shift ;;
     --priority) prio=$2; shift ;;
+    --cpu) cpu=$2; shift ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n 2,22p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,25p "$0"; exit 0 ;;
     *) echo "latency-compare.sh: unknown option $1" >&2; exit 2 ;;
   esac
   shift
@@ -45,9 +49,12 @@ trap 'rm -rf "$tmp"' EXIT
 
 echo "machine: $(lscpu | awk -F: '/Model name/ {sub(/^[ \t]+/, "", $2); print $2; exit}'), $(nproc) CPUs, Linux $(uname -r)"
 echo "running contourd --latency-test $seconds and cyclictest -D $seconds side by side..."
-"$contourd" --latency-test "$seconds" "${extra[@]}" >"$tmp/contourd.out" 2>"$tmp/contourd.err" &
+c_pin=(--priority "$prio"); k_pin=()
+if [ "$cpu" -ge 0 ]; then c_pin+=(--cpu "$cpu"); k_pin=(-a "$cpu"); fi
+echo "priority $prio, $([ "$cpu" -ge 0 ] && echo "both pinned to CPU $cpu" || echo "not pinned")"
+"$contourd" --latency-test "$seconds" "${c_pin[@]}" "${extra[@]}" >"$tmp/contourd.out" 2>"$tmp/contourd.err" &
 pid_c=$!
-cyclictest -m -t1 -p"$prio" -i1000 -D "$seconds" -q -h 20000 >"$tmp/cyclictest.out" 2>"$tmp/cyclictest.err" &
+cyclictest -m -t1 "${k_pin[@]}" -p"$prio" -i1000 -D "$seconds" -q -h 20000 >"$tmp/cyclictest.out" 2>"$tmp/cyclictest.err" &
 pid_k=$!
 rc_c=0; rc_k=0
 wait "$pid_c" || rc_c=$?
@@ -88,7 +95,7 @@ k_stats=$(awk '
   }' "$tmp/cyclictest.out")
 read -r k_min k_avg k_p99 k_p999 k_max k_total k_ov <<<"$k_stats"
 echo
-echo "== cyclictest -m -t1 -p$prio -i1000 -D $seconds -q -h 20000"
+echo "== cyclictest -m -t1 ${k_pin[*]} -p$prio -i1000 -D $seconds -q -h 20000"
 echo "samples $k_total (overflows >= 20000 us: $k_ov)"
 echo "wake-up latency us: min $k_min avg $k_avg p99 $k_p99 p99.9 $k_p999 max $k_max"
 

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <thread>
 
 #include "daemon/rt_timing.hpp"
@@ -41,23 +42,25 @@ TEST(SpscRing, TwoThreadsKeepOrderAndAccountForEveryRecord) {
   std::uint64_t received = 0;
   std::uint64_t last = 0;
   bool ordered = true;
+  std::atomic<bool> producer_done{false};
   std::thread consumer([&] {
     Rec v{};
-    std::uint64_t idle = 0;
-    while (idle < 2000000) {
+    // Runs until the producer is done and the ring is drained (no idle-count heuristic: under
+    // CPU contention a yield can take milliseconds, and the last record may have been dropped).
+    for (;;) {
+      const bool done = producer_done.load(std::memory_order_acquire);
       if (r.pop(v)) {
         if (received > 0 && v.seq <= last) ordered = false;
         last = v.seq;
         ++received;
-        idle = 0;
-      } else {
-        ++idle;
-        std::this_thread::yield();
+        continue;
       }
-      if (last == kN - 1) break;
+      if (done) break;  // done was seen before this empty pop: nothing more will come
+      std::this_thread::yield();
     }
   });
   for (std::uint64_t i = 0; i < kN; ++i) r.push({i, static_cast<double>(i)});
+  producer_done.store(true, std::memory_order_release);
   consumer.join();
   Rec v{};
   while (r.pop(v)) ++received;
@@ -83,7 +86,9 @@ TEST(LatencyHistogram, QuantilesAndBins) {
   EXPECT_EQ(h.count(), 1000u);
   EXPECT_DOUBLE_EQ(h.quantile_us(0.5), 11.0);          // upper edge of the 10 us bin
   EXPECT_DOUBLE_EQ(h.quantile_us(0.99), 11.0);
-  EXPECT_DOUBLE_EQ(h.quantile_us(0.999), 2600.0);
+  EXPECT_DOUBLE_EQ(h.quantile_us(0.999), 2501.0);    // 1 us bins up to 20 ms
+  h.record(30'050'000);                                // 30.05 ms: a 100 us bin
+  EXPECT_DOUBLE_EQ(h.quantile_us(1.0), 30100.0);
   EXPECT_EQ(h.max_ns(), 2'500'000);
   EXPECT_EQ(h.min_ns(), 10'500);
   EXPECT_NEAR(h.mean_us(), (990 * 10.5 + 10 * 2500.0) / 1000.0, 1e-9);
