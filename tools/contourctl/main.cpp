@@ -1,136 +1,106 @@
-// contourctl — command-line client of contourd's command socket (daemon/commands.hpp).
-//   contourctl [--socket PATH] [--json] status|load PROGRAM|run [PROGRAM] [--wait]|hold|resume|stop|
-//              estop|reset|enable|disable|jog AXIS VEL_MM_MIN DIST_MM|set-position AXIS POS_MM|
-//              gains get|gains set k=v...|override PERCENT|record start [PATH]|record stop|shutdown
-// `run PROGRAM --wait --json` ends with one JSON object: state, duration_s, max_contour_error_um,
-// rms_contour_error_um, faults, overruns (+ job, completed, ...). Exit status: 0 ok, 1 error reply
-// or run ended in FAULT/ESTOP/not completed, 2 usage, 3 cannot reach the daemon.
-// Socket: --socket, else $CONTOURD_SOCKET, else /run/contourd/contourd.sock when it exists, else
-// ${XDG_RUNTIME_DIR:-/tmp}/contourd.sock (config/sim.yaml's default).
-#include <sys/socket.h>
-#include <sys/stat.h>
-#include <sys/un.h>
+// contourctl — command-line client of contourd's command socket (daemon/commands.hpp), plus the
+// bench tools built on it: progress while running, a live status line, telemetry plots (gnuplot),
+// live gain tuning saved back to the YAML config, and seed 003's circle test on the machine.
+// `contourctl --help` documents every subcommand, the exit codes and the gains-save choice.
+// `run PROGRAM --wait --json` ends with one JSON object on stdout: state, duration_s,
+// max_contour_error_um, rms_contour_error_um, faults, overruns (+ job, completed, ...); progress
+// goes to stderr, so scripts keep reading the last stdout line (tools/demo.sh).
+#include <signal.h>
+#include <sys/ioctl.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
-
-#include <cerrno>
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "control/gcode.hpp"
+#include "tools/contourctl/circle.hpp"
+#include "tools/contourctl/client.hpp"
+#include "tools/contourctl/gains.hpp"
+#include "tools/contourctl/plot.hpp"
+
 namespace {
 
 using nlohmann::json;
+using namespace contour::ctl;
+namespace fs = std::filesystem;
 
-struct Unreachable : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-struct ErrorReply : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
+volatile std::sig_atomic_t g_interrupted = 0;
+extern "C" void on_sigint(int) { g_interrupted = 1; }
 
-std::string default_socket() {
-  if (const char* e = std::getenv("CONTOURD_SOCKET"); e != nullptr && *e != '\0') return e;
-  struct stat st{};
-  if (::stat("/run/contourd/contourd.sock", &st) == 0) return "/run/contourd/contourd.sock";
-  const char* x = std::getenv("XDG_RUNTIME_DIR");
-  return std::string(x != nullptr && *x != '\0' ? x : "/tmp") + "/contourd.sock";
+// SIGINT without SA_RESTART: the status poll's sleep and recv return early.
+void install_sigint() {
+  struct sigaction sa {};
+  sa.sa_handler = on_sigint;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = 0;
+  ::sigaction(SIGINT, &sa, nullptr);
 }
 
-class Client {
- public:
-  explicit Client(const std::string& path) : path_(path) {
-    fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    if (fd_ < 0) throw Unreachable(std::string("socket: ") + std::strerror(errno));
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    if (path.size() >= sizeof(addr.sun_path)) throw Unreachable(path + ": socket path too long");
-    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
-    if (::connect(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
-      const int err = errno;
-      ::close(fd_);
-      fd_ = -1;
-      if (err == ENOENT || err == ECONNREFUSED) {
-        throw Unreachable(path + ": contourd is not running (" + std::strerror(err) +
-                          "); start it or pass --socket PATH");
-      }
-      if (err == EACCES || err == EPERM) {
-        throw Unreachable(path + ": permission denied; the socket is group-writable: add your user "
-                                 "to contourd's group");
-      }
-      throw Unreachable(path + ": " + std::strerror(err));
-    }
-  }
-  ~Client() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  Client(const Client&) = delete;
-  Client& operator=(const Client&) = delete;
-
-  json call(json req) {
-    req["id"] = ++id_;
-    const std::string line = req.dump() + "\n";
-    std::size_t off = 0;
-    while (off < line.size()) {
-      const ssize_t n = ::send(fd_, line.data() + off, line.size() - off, MSG_NOSIGNAL);
-      if (n < 0) {
-        if (errno == EINTR) continue;
-        throw Unreachable(path_ + ": send: " + std::strerror(errno));
-      }
-      off += static_cast<std::size_t>(n);
-    }
-    for (;;) {
-      const std::size_t nl = buf_.find('\n');
-      if (nl != std::string::npos) {
-        const std::string l = buf_.substr(0, nl);
-        buf_.erase(0, nl + 1);
-        json r = json::parse(l, nullptr, false);
-        if (r.is_discarded() || !r.is_object()) throw Unreachable("daemon sent a malformed reply");
-        if (r.contains("event")) continue;  // subscription traffic
-        if (!r.value("ok", false)) throw ErrorReply(r.value("error", std::string("error")));
-        return r.value("result", json::object());
-      }
-      char tmp[4096];
-      const ssize_t n = ::recv(fd_, tmp, sizeof(tmp), 0);
-      if (n == 0) throw Unreachable(path_ + ": daemon closed the connection");
-      if (n < 0) {
-        if (errno == EINTR) continue;
-        throw Unreachable(path_ + ": recv: " + std::strerror(errno));
-      }
-      buf_.append(tmp, static_cast<std::size_t>(n));
-    }
-  }
-
- private:
-  std::string path_;
-  int fd_ = -1;
-  std::string buf_;
-  long id_ = 0;
-};
+std::string slurp(const std::string& file) {
+  std::ifstream in(file);
+  if (!in) throw ErrorReply(file + ": cannot read");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
 
 // Inline text when small (the daemon may not see the client's files, e.g. PrivateTmp), else the
 // absolute path.
 json program_args(const std::string& file) {
-  namespace fs = std::filesystem;
   std::error_code ec;
   const auto size = fs::file_size(file, ec);
   if (ec) throw ErrorReply(file + ": cannot read (" + ec.message() + ")");
-  if (size < 32 * 1024) {
-    std::ifstream in(file);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return {{"program", ss.str()}, {"name", file}};
-  }
+  if (size < 32 * 1024) return {{"program", slurp(file)}, {"name", file}};
   return {{"path", fs::absolute(file).string()}};
+}
+
+// Source lines of the program's motion blocks, for "block n/N" (the daemon's status reports the
+// current source line, not a block index). Parsed with the default program setup: offsets and
+// tools do not change which lines move. Empty when the file does not parse here.
+std::vector<int> motion_lines(const std::string& file) {
+  std::vector<int> lines;
+  try {
+    contour::control::GcodeParser p(contour::control::ProgramSetup{}, file);
+    std::ifstream in(file);
+    std::string l;
+    std::vector<contour::control::Block> blocks;
+    while (std::getline(in, l) && !p.ended()) p.parse_line(l, blocks);
+    p.finish(blocks);
+    for (const auto& b : blocks) {
+      if (b.kind == contour::control::BlockKind::kMotion) lines.push_back(b.line);
+    }
+  } catch (const std::exception&) {
+    lines.clear();
+  }
+  return lines;
+}
+
+std::string clock_str(double s) {
+  if (!std::isfinite(s) || s < 0.0) return "--:--";
+  char b[32];
+  const long m = static_cast<long>(s) / 60;
+  std::snprintf(b, sizeof b, "%ld:%04.1f", m, s - 60.0 * static_cast<double>(m));
+  return b;
+}
+
+int terminal_columns() {
+  winsize w{};
+  if (::ioctl(STDERR_FILENO, TIOCGWINSZ, &w) == 0 && w.ws_col > 20) return w.ws_col;
+  return 100;
 }
 
 void print(const json& j, bool as_json) {
@@ -140,7 +110,8 @@ void print(const json& j, bool as_json) {
   }
   if (j.is_object()) {
     for (auto it = j.begin(); it != j.end(); ++it) {
-      std::cout << it.key() << ": " << (it.value().is_string() ? it.value().get<std::string>() : it.value().dump())
+      std::cout << it.key() << ": "
+                << (it.value().is_string() ? it.value().get<std::string>() : it.value().dump())
                 << '\n';
     }
   } else {
@@ -148,80 +119,413 @@ void print(const json& j, bool as_json) {
   }
 }
 
+void print_run_summary(const json& r) {
+  const bool done = r.value("completed", false);
+  std::printf("run: job %llu %s (state %s) in %.3f s\n",
+              static_cast<unsigned long long>(r.value("job", 0ULL)),
+              done ? "completed" : "NOT completed", r.value("state", std::string("?")).c_str(),
+              r.value("duration_s", 0.0));
+  std::printf(
+      "contour error: max %.1f um, RMS %.1f um (distance to the planned path); max following error "
+      "%.1f um\n",
+      r.value("max_contour_error_um", 0.0), r.value("rms_contour_error_um", 0.0),
+      r.value("max_following_error_um", 0.0));
+  std::printf("overruns: %llu   telemetry dropped: %llu   faults: %s\n",
+              static_cast<unsigned long long>(r.value("overruns", 0ULL)),
+              static_cast<unsigned long long>(r.value("telemetry_dropped", 0ULL)),
+              r.contains("faults") && !r["faults"].empty() ? r["faults"].dump().c_str() : "none");
+}
+
+struct RunOptions {
+  std::string program;
+  bool wait = false;
+  double timeout_s = 3600.0;
+  bool quiet = false;
+  double progress_interval_s = 1.0;  // non-TTY progress lines
+};
+
+int cmd_run(Client& c, const RunOptions& o, bool as_json) {
+  json req{{"cmd", "run"}};
+  std::vector<int> lines;
+  double total_mm = 0.0;
+  std::size_t n_blocks = 0;
+  if (!o.program.empty()) {
+    if (o.wait) {
+      // Load first (same as run with a program: the daemon's run loads it the same way): the load
+      // reply carries the program length and motion-block count the progress display needs.
+      json l{{"cmd", "load"}};
+      l.update(program_args(o.program));
+      const json lr = c.call(l);
+      total_mm = lr.value("length_mm", 0.0);
+      n_blocks = lr.value("motion_blocks", std::size_t{0});
+      lines = motion_lines(o.program);
+    } else {
+      req.update(program_args(o.program));
+    }
+  }
+  // Install before the run starts: a Ctrl-C from here on holds instead of killing us mid-reply.
+  if (o.wait) install_sigint();
+  const json r = c.call(req);
+  if (!o.wait) {
+    print(r, as_json);
+    return kExitOk;
+  }
+  const std::uint64_t job = r.at("job").get<std::uint64_t>();
+  const bool tty = ::isatty(STDERR_FILENO) != 0;
+  const bool show = !o.quiet;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto until = t0 + std::chrono::duration<double>(o.timeout_s);
+  auto last_line = t0 - std::chrono::hours(1);
+  double max_eps_um = 0.0;
+  if (n_blocks == 0) n_blocks = lines.size();
+  bool interrupted = false;
+  for (;;) {
+    if (g_interrupted != 0) {
+      interrupted = true;
+      break;
+    }
+    const json st = c.call({{"cmd", "status"}});
+    const std::string s = st.at("state").get<std::string>();
+    const bool ended =
+        st.at("finished_job").get<std::uint64_t>() >= job && s != "RUNNING" && s != "HOLD";
+    if (ended || s == "FAULT" || s == "ESTOP" || s == "DISABLED") break;
+    if (std::chrono::steady_clock::now() > until)
+      throw ErrorReply("timed out waiting for the program");
+    max_eps_um = std::max(max_eps_um, st.value("contour_error_um", 0.0));
+    const double prog = st.value("progress_mm", 0.0);
+    // Block index from the current source line (status has no block index): motion blocks of the
+    // file parsed here whose line is at or before it.
+    const int line = st.value("line", 0);
+    std::size_t block = 0;
+    while (block < lines.size() && lines[block] <= line) ++block;
+    block = std::min(block, n_blocks);
+    // Fraction done: by path length when known, else by motion blocks.
+    double frac = -1.0;
+    if (total_mm > 0.0)
+      frac = std::clamp(prog / total_mm, 0.0, 1.0);
+    else if (n_blocks > 0)
+      frac = static_cast<double>(block == 0 ? 0 : block - 1) / static_cast<double>(n_blocks);
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double remaining = frac > 0.01 ? elapsed * (1.0 - frac) / frac : -1.0;
+    if (show) {
+      char info[200];
+      std::snprintf(
+          info, sizeof info, "%5.1f%%  block %zu/%s  %s elapsed  %s left  max |eps| %.1f um  %s",
+          frac >= 0.0 ? 100.0 * frac : 0.0, block,
+          n_blocks > 0 ? std::to_string(n_blocks).c_str() : "?", clock_str(elapsed).c_str(),
+          clock_str(remaining).c_str(), max_eps_um, s.c_str());
+      if (tty) {
+        const int width =
+            std::clamp(terminal_columns() - static_cast<int>(std::strlen(info)) - 4, 10, 40);
+        const int fill = frac >= 0.0 ? static_cast<int>(std::lround(frac * width)) : 0;
+        std::fprintf(stderr, "\r[%s%s] %s\033[K",
+                     std::string(static_cast<std::size_t>(fill), '#').c_str(),
+                     std::string(static_cast<std::size_t>(width - fill), '-').c_str(), info);
+        std::fflush(stderr);
+      } else if (std::chrono::steady_clock::now() - last_line >=
+                 std::chrono::duration<double>(o.progress_interval_s)) {
+        last_line = std::chrono::steady_clock::now();
+        std::fprintf(stderr, "run: %s\n", info);
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(tty ? 100 : 50));
+  }
+  if (show && tty) std::fprintf(stderr, "\r\033[K");
+  if (interrupted) {
+    std::string what;
+    try {
+      c.call({{"cmd", "hold"}});
+      what =
+          "Ctrl-C: asked contourd to hold (feed hold, decelerating on the path). "
+          "`contourctl resume` continues, `contourctl stop` ends the program.";
+    } catch (const ErrorReply& e) {
+      what = std::string("Ctrl-C: hold refused by contourd: ") + e.what();
+    }
+    std::cerr << "contourctl: " << what << '\n';
+    const json res = c.call({{"cmd", "result"}, {"job", job}});
+    if (as_json)
+      print(res, true);
+    else
+      print_run_summary(res);
+    return kExitInterrupted;
+  }
+  const json res = c.call({{"cmd", "result"}, {"job", job}});
+  if (as_json)
+    print(res, true);
+  else
+    print_run_summary(res);
+  return res.value("completed", false) ? kExitOk : kExitError;
+}
+
+std::string watch_line(const json& st) {
+  std::ostringstream o;
+  char b[96];
+  o << st.value("state", std::string("?"));
+  if (st.value("jogging", false)) o << "(jog)";
+  const char* names[] = {"X", "Y", "Z"};
+  std::size_t i = 0;
+  for (const auto& v : st.value("act_mm", json::array())) {
+    std::snprintf(b, sizeof b, "  %s %9.3f", i < 3 ? names[i] : "?", v.get<double>());
+    o << b;
+    ++i;
+  }
+  std::snprintf(b, sizeof b, " mm  |eps| %7.1f um", st.value("contour_error_um", 0.0));
+  o << b;
+  for (const char* k : {"force_N", "force_n"}) {
+    if (st.contains(k) && st[k].is_number()) {
+      std::snprintf(b, sizeof b, "  F %7.1f N", st[k].get<double>());
+      o << b;
+    }
+  }
+  const json tm = st.value("timing", json::object());
+  std::snprintf(b, sizeof b, "  late p99 %5.0f us  ovr %llu  feed %3.0f%%  line %d",
+                tm.value("lateness_p99_us", 0.0),
+                static_cast<unsigned long long>(tm.value("overruns", 0ULL)),
+                100.0 * st.value("override", 1.0), st.value("line", 0));
+  o << b;
+  return o.str();
+}
+
+int cmd_watch(Client& c, double interval_s, long count, bool as_json) {
+  const bool tty = ::isatty(STDOUT_FILENO) != 0 && !as_json;
+  install_sigint();
+  for (long k = 0; count <= 0 || k < count; ++k) {
+    if (g_interrupted != 0) break;
+    const json st = c.call({{"cmd", "status"}});
+    if (as_json) {
+      std::cout << st.dump() << std::endl;
+    } else if (tty) {
+      std::cout << '\r' << watch_line(st) << "\033[K" << std::flush;
+    } else {
+      std::cout << watch_line(st) << std::endl;
+    }
+    if (count > 0 && k + 1 >= count) break;
+    std::this_thread::sleep_for(std::chrono::duration<double>(interval_s));
+  }
+  if (tty) std::cout << std::endl;
+  return kExitOk;
+}
+
+constexpr const char* kFooter = R"(
+Socket: --socket PATH, else $CONTOURD_SOCKET, else /run/contourd/contourd.sock when it exists, else
+  ${XDG_RUNTIME_DIR:-/tmp}/contourd.sock (config/sim.yaml's default).
+
+Exit status:
+  0    success
+  1    error reply from contourd, run not completed (FAULT/ESTOP/stopped), plot or analysis failed
+  2    bad command line
+  3    contourd not reachable: no socket at the path (not running), connection refused (stale
+       socket), or the daemon closed the connection
+  4    permission denied on the socket (join the socket's group; socket.mode in the config)
+  130  run --wait interrupted by Ctrl-C: contourd was asked to hold the program
+
+Progress (run --wait) and circle-test progress go to stderr: a bar on a terminal, a plain line
+every --progress-interval seconds otherwise; --json prints only the final JSON object on stdout.
+
+Gains keys (gains set): axis.<x|y|z|index>.<kp|ki_per_s|kd_s|ff>=V, coupling.<cp|ci_per_s|cd_s>=V,
+  coupling=true|false, or the daemon's own keys for all axes: kp=0.6 | kp=0.6,0.6,0.6, cp=15 ...
+  The daemon refuses gain changes while RUNNING (hold first) and unstable gains.
+
+gains save: rewrites the gain VALUES under `control:` in the YAML config file in place
+  (--file, default $CONTOURD_CONFIG or /etc/contourd/contourd.yaml; --output writes elsewhere),
+  keeping comments, key order and layout; the previous file is kept as FILE.bak. Chosen over a
+  separate overrides file because the config loader has no include key: one file stays the
+  single source of truth, and `contourd --check-config FILE` validates it. The edited text is
+  validated and read back with contourd's own loader before anything is written. Mapping:
+  kp -> control.kp (law p) or control.pid.* (law pid); coupling on/off -> controller: ccc | p;
+  cp/ci_per_s/cd_s -> control.coupling.*; ff -> control.feed_forward (must be equal on all axes).
+
+Plots (gnuplot, PNG; plot CSV... --plot F.png --kind K, or record stop --plot F.png):
+  error   contour error vs time (several CSVs overlay, --label per CSV)
+  path    XY path: reference vs actual with the contour error magnified xN (--magnify N, auto)
+  path3d  the same in 3-D
+  force   force vs reference (when the CSV has force columns) and feed override vs time
+  timing  servo loop timing from the daemon's status (no CSV)
+)";
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"contourctl: client of the contourd command socket"};
+  app.footer(kFooter);
   std::string socket_path;
   bool as_json = false;
-  app.add_option("--socket", socket_path, "command socket (default: $CONTOURD_SOCKET, "
-                                          "/run/contourd/contourd.sock, ${XDG_RUNTIME_DIR:-/tmp}/contourd.sock)");
-  app.add_flag("--json", as_json, "print one JSON object");
+  app.add_option("--socket", socket_path, "command socket (see below)");
+  app.add_flag("--json", as_json, "print JSON (one object per line) instead of text");
   app.require_subcommand(1);
+  RunOptions ro;
   std::string program;
-  bool wait = false;
-  double timeout_s = 3600.0;
   std::string axis;
   double vel = 0.0, dist = 0.0, pos = 0.0, pct = 100.0;
-  std::vector<std::string> gains_args;
-  std::vector<std::string> record_args;
+  std::vector<std::string> gains_args, record_args, force_args, csvs, labels;
+  std::string gains_file, gains_output, plot_png, plot_kind = "error", plot_title, plot_program;
+  double magnify = 0.0, watch_interval = 0.5;
+  long watch_count = 0;
+  CircleTestOptions co;
+  bool both = false, ccw_flag = false, cw_flag = false;
 
   app.add_subcommand("status", "machine state, positions, errors, loop timing");
   auto* load = app.add_subcommand("load", "validate and plan a part program");
   load->add_option("PROGRAM", program, "RS274/NGC file")->required();
   auto* run = app.add_subcommand("run", "run the loaded program (or load PROGRAM first)");
-  run->add_option("PROGRAM", program, "RS274/NGC file");
-  run->add_flag("--wait", wait, "wait until the program ends and print its figures");
-  run->add_option("--timeout", timeout_s, "seconds to wait with --wait");
-  for (const char* c : {"hold", "resume", "stop", "estop", "reset", "enable", "disable", "shutdown"}) {
+  run->add_option("PROGRAM", ro.program, "RS274/NGC file");
+  run->add_flag("--wait", ro.wait,
+                "show progress until the program ends, then its figures; Ctrl-C holds");
+  run->add_option("--timeout", ro.timeout_s, "seconds to wait with --wait");
+  run->add_flag("--quiet", ro.quiet, "no progress output");
+  run->add_option("--progress-interval", ro.progress_interval_s,
+                  "seconds between progress lines when not a TTY");
+  for (const char* c :
+       {"hold", "resume", "stop", "estop", "reset", "enable", "disable", "shutdown"}) {
     app.add_subcommand(c, std::string(c));
   }
   auto* jog = app.add_subcommand("jog", "jog an axis by a distance");
   jog->add_option("AXIS", axis)->required();
   jog->add_option("VELOCITY_MM_MIN", vel)->required();
   jog->add_option("DISTANCE_MM", dist)->required();
-  auto* setpos = app.add_subcommand("set-position", "set an axis position (sim / absolute encoders)");
+  auto* setpos =
+      app.add_subcommand("set-position", "set an axis position (sim / absolute encoders)");
   setpos->add_option("AXIS", axis)->required();
   setpos->add_option("POSITION_MM", pos)->required();
-  auto* gains = app.add_subcommand("gains", "gains get | gains set k=v ... (kp=0.6 or kp=0.6,0.6,0.6)");
+  auto* gains =
+      app.add_subcommand("gains", "gains get | gains set KEY=V ... | gains save [--file CONFIG]");
   gains->add_option("ARGS", gains_args)->required();
+  gains->add_option("--file", gains_file, "gains save: config file to update");
+  gains->add_option("--output", gains_output, "gains save: write the edited config here instead");
   auto* ovr = app.add_subcommand("override", "feed override in percent");
   ovr->add_option("PERCENT", pct)->required();
-  auto* rec = app.add_subcommand("record", "record start [PATH] | record stop");
+  auto* rec =
+      app.add_subcommand("record", "record start [PATH] | record stop [--plot F.png --kind K]");
   rec->add_option("ARGS", record_args)->required();
+  rec->add_option("--plot", plot_png, "record stop: plot the recorded CSV to this PNG");
+  rec->add_option("--kind", plot_kind, "error | path | path3d | force | timing");
+  rec->add_option("--magnify", magnify, "path plots: error magnification (default automatic)");
+  rec->add_option("--title", plot_title, "extra title line");
+  rec->add_option("--program", plot_program,
+                  "path plots: also draw this part program (programmed path)");
+  auto* plot = app.add_subcommand("plot", "plot telemetry CSV(s) to a PNG");
+  plot->add_option("CSV", csvs,
+                   "telemetry CSV file(s) written by `record` (none for --kind timing)");
+  plot->add_option("--plot,-o", plot_png, "output PNG")->required();
+  plot->add_option("--kind", plot_kind, "error | path | path3d | force | timing");
+  plot->add_option("--label", labels, "legend label per CSV (repeat)");
+  plot->add_option("--magnify", magnify, "path plots: error magnification (default automatic)");
+  plot->add_option("--title", plot_title, "extra title line");
+  plot->add_option("--program", plot_program,
+                   "path plots: also draw this part program (programmed path)");
+  auto* watch = app.add_subcommand("watch", "refreshing status line (Ctrl-C ends)");
+  watch->add_option("--interval", watch_interval, "seconds between updates")
+      ->check(CLI::Range(0.01, 3600.0));
+  watch->add_option("--count", watch_count, "stop after N updates (0: until Ctrl-C)");
+  auto* force = app.add_subcommand("force", "force on | force off | force ref NEWTON");
+  force->add_option("ARGS", force_args)->required();
+  auto* circle = app.add_subcommand(
+      "circle-test", "seed 003 circle test: per-axis gain and time constant, matched gains");
+  circle->add_option("--radius", co.radius_mm, "circle radius (mm)");
+  circle->add_option("--feed", co.feed_mm_min, "feed (mm/min)");
+  circle->add_flag("--cw", cw_flag, "clockwise (default)");
+  circle->add_flag("--ccw", ccw_flag, "counter-clockwise");
+  circle->add_flag("--both", both, "CW then CCW; estimates averaged");
+  circle->add_option("--turns", co.turns, "revolutions per run (first skipped, >= 2)");
+  circle->add_flag("--apply", co.apply, "set the proposed matched gains (gains set)");
+  circle->add_option("--plot", co.plot_png,
+                     "polar plot of the radial deviation (with --apply: before/after)");
+  circle->add_option("--record-dir", co.record_dir,
+                     "directory both the daemon and you can write/read (default $TMPDIR or /tmp)");
+  circle->add_flag("--keep-csv", co.keep_csv, "keep the recorded CSVs");
+  circle->add_option("--delay-cycles", co.delay_cycles,
+                     "bus transport delay in cycles (default 1, as config/sim.yaml)");
+  bool no_comp = false;
+  circle->add_flag("--no-delay-compensation", no_comp,
+                   "the daemon's config has control.delay_compensation: false");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int rc = app.exit(e);
-    return rc == 0 ? 0 : 2;
+    return rc == 0 ? kExitOk : kExitUsage;
   }
   if (socket_path.empty()) socket_path = default_socket();
   const std::string cmd = app.get_subcommands().front()->get_name();
+  co.cw = cw_flag || both || !ccw_flag;
+  co.ccw = ccw_flag || both;
+  co.delay_compensation = !no_comp;
+  PlotOptions po;
+  po.labels = labels;
+  po.magnify = magnify;
+  po.title = plot_title;
+  po.program = plot_program;
   try {
+    // Commands that may run without a daemon.
+    if (cmd == "plot") {
+      const PlotKind kind = parse_plot_kind(plot_kind);
+      std::string desc;
+      if (kind == PlotKind::kTiming) {
+        Client c(socket_path);
+        desc = plot_timing(c.call({{"cmd", "status"}}), plot_png, po);
+      } else {
+        if (csvs.empty()) {
+          std::cerr << "contourctl: plot --kind " << plot_kind << " needs at least one CSV\n";
+          return kExitUsage;
+        }
+        std::vector<TelemetryCsv> runs;
+        for (const auto& f : csvs) runs.push_back(read_telemetry_csv(f));
+        desc = plot_csv(kind, runs, plot_png, po);
+      }
+      if (as_json)
+        std::cout << json{{"plot", plot_png}, {"what", desc}}.dump() << std::endl;
+      else
+        std::cout << "plot: " << plot_png << " (" << desc << ")\n";
+      return kExitOk;
+    }
+    if (cmd == "gains" && !gains_args.empty() && gains_args[0] == "save") {
+      std::string file = gains_file;
+      if (file.empty()) {
+        const char* e = std::getenv("CONTOURD_CONFIG");
+        file = e != nullptr && *e != '\0' ? e : "/etc/contourd/contourd.yaml";
+      }
+      Client c(socket_path);
+      const json g = c.call({{"cmd", "gains"}});
+      const std::string edited = config_with_gains(slurp(file), file, g);
+      const std::string out = gains_output.empty() ? file : gains_output;
+      if (gains_output.empty()) {
+        std::error_code ec;
+        fs::copy_file(file, file + ".bak", fs::copy_options::overwrite_existing, ec);
+        if (ec)
+          throw ErrorReply(file + ".bak: cannot write the backup (" + ec.message() +
+                           "); nothing changed");
+      }
+      {
+        const std::string tmp = out + ".tmp";
+        std::ofstream o(tmp);
+        if (!o || !(o << edited) || !(o.flush())) throw ErrorReply(tmp + ": cannot write");
+        o.close();
+        fs::rename(tmp, out);
+      }
+      if (as_json)
+        std::cout << json{{"saved", out}, {"gains", g}}.dump() << std::endl;
+      else
+        std::cout
+            << "gains saved to " << out
+            << (gains_output.empty() ? " (previous: " + file + ".bak)" : "")
+            << "; `contourd --check-config " << out
+            << "` validates it; SIGHUP makes contourd reload it when it is its --config file\n";
+      return kExitOk;
+    }
     Client c(socket_path);
     json req{{"cmd", cmd}};
+    if (cmd == "run") return cmd_run(c, ro, as_json);
+    if (cmd == "watch") return cmd_watch(c, watch_interval, watch_count, as_json);
+    if (cmd == "circle-test") {
+      const json r = run_circle_test(c, co);
+      if (as_json)
+        std::cout << r.dump() << std::endl;
+      else
+        std::cout << format_circle_report(r);
+      return kExitOk;
+    }
     if (cmd == "load") {
       req.update(program_args(program));
-    } else if (cmd == "run") {
-      if (!program.empty()) req.update(program_args(program));
-      const json r = c.call(req);
-      if (!wait) {
-        print(r, as_json);
-        return 0;
-      }
-      const std::uint64_t job = r.at("job").get<std::uint64_t>();
-      const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-      for (;;) {
-        const json st = c.call({{"cmd", "status"}});
-        const std::string s = st.at("state").get<std::string>();
-        const bool ended = st.at("finished_job").get<std::uint64_t>() >= job && s != "RUNNING" && s != "HOLD";
-        if (ended || s == "FAULT" || s == "ESTOP" || s == "DISABLED") break;
-        if (std::chrono::steady_clock::now() > until) throw ErrorReply("timed out waiting for the program");
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-      }
-      const json res = c.call({{"cmd", "result"}, {"job", job}});
-      print(res, as_json);
-      return res.value("completed", false) ? 0 : 1;
     } else if (cmd == "jog") {
       req["axis"] = axis;
       req["velocity_mm_min"] = vel;
@@ -231,64 +535,74 @@ int main(int argc, char** argv) {
       req["position_mm"] = pos;
     } else if (cmd == "override") {
       req["percent"] = pct;
+    } else if (cmd == "force") {
+      // The daemon answers "not wired yet" today; the request shape is the obvious one.
+      req["action"] = force_args[0];
+      if (force_args.size() > 1) req["reference_N"] = std::stod(force_args[1]);
     } else if (cmd == "record") {
       if (record_args[0] != "start" && record_args[0] != "stop") {
-        std::cerr << "contourctl: record start [PATH] | record stop\n";
-        return 2;
+        std::cerr << "contourctl: record start [PATH] | record stop [--plot F.png]\n";
+        return kExitUsage;
       }
       req["action"] = record_args[0];
-      if (record_args.size() > 1) req["path"] = std::filesystem::absolute(record_args[1]).string();
+      if (record_args.size() > 1) req["path"] = fs::absolute(record_args[1]).string();
+      const json r = c.call(req);
+      if (record_args[0] == "stop" && !plot_png.empty()) {
+        const PlotKind kind = parse_plot_kind(plot_kind);
+        const std::string csv = r.value("path", std::string());
+        std::string desc;
+        if (kind == PlotKind::kTiming) {
+          desc = plot_timing(c.call({{"cmd", "status"}}), plot_png, po);
+        } else {
+          if (csv.empty())
+            throw ErrorReply("record stop: no recording was active, nothing to plot");
+          desc = plot_csv(kind, {read_telemetry_csv(csv)}, plot_png, po);
+        }
+        json out = r;
+        out["plot"] = plot_png;
+        if (as_json)
+          print(out, true);
+        else
+          std::cout << "recording stopped: " << csv << "\nplot: " << plot_png << " (" << desc
+                    << ")\n";
+        return kExitOk;
+      }
+      print(r, as_json);
+      return kExitOk;
     } else if (cmd == "gains") {
       if (gains_args[0] == "set") {
-        json set = json::object();
-        for (std::size_t i = 1; i < gains_args.size(); ++i) {
-          const auto& kv = gains_args[i];
-          const auto eq = kv.find('=');
-          if (eq == std::string::npos) {
-            std::cerr << "contourctl: gains set expects key=value, got '" << kv << "'\n";
-            return 2;
-          }
-          const std::string k = kv.substr(0, eq), v = kv.substr(eq + 1);
-          if (v == "true" || v == "false") {
-            set[k] = v == "true";
-            continue;
-          }
-          json vals = json::array();
-          std::stringstream ss(v);
-          std::string item;
-          while (std::getline(ss, item, ',')) {
-            try {
-              std::size_t used = 0;
-              vals.push_back(std::stod(item, &used));
-              if (used != item.size()) throw std::invalid_argument(item);
-            } catch (const std::exception&) {
-              std::cerr << "contourctl: gains set: '" << item << "' is not a number (key " << k << ")\n";
-              return 2;
-            }
-          }
-          set[k] = vals.size() == 1 ? vals[0] : vals;
+        const json cur = c.call({{"cmd", "gains"}});
+        try {
+          req["set"] = gains_set_request({gains_args.begin() + 1, gains_args.end()}, cur);
+        } catch (const std::invalid_argument& e) {
+          std::cerr << "contourctl: " << e.what() << '\n';
+          return kExitUsage;
         }
-        if (set.empty()) {
-          std::cerr << "contourctl: gains set needs key=value pairs\n";
-          return 2;
-        }
-        req["set"] = set;
       } else if (gains_args[0] != "get") {
-        std::cerr << "contourctl: gains get | gains set k=v ...\n";
-        return 2;
+        std::cerr << "contourctl: gains get | gains set KEY=V ... | gains save [--file CONFIG]\n";
+        return kExitUsage;
       }
+      const json g = c.call(req);
+      if (as_json)
+        print(g, true);
+      else
+        std::cout << format_gains(g);
+      return kExitOk;
     }
     print(c.call(req), as_json);
-    return 0;
+    return kExitOk;
   } catch (const Unreachable& e) {
     std::cerr << "contourctl: " << e.what() << '\n';
-    return 3;
+    return e.exit_code;
   } catch (const ErrorReply& e) {
     if (as_json) std::cout << json{{"error", e.what()}}.dump() << std::endl;
     std::cerr << "contourctl: " << cmd << ": " << e.what() << '\n';
-    return 1;
+    return kExitError;
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "contourctl: " << cmd << ": " << e.what() << '\n';
+    return kExitUsage;
   } catch (const std::exception& e) {
-    std::cerr << "contourctl: " << e.what() << '\n';
-    return 1;
+    std::cerr << "contourctl: " << cmd << ": " << e.what() << '\n';
+    return kExitError;
   }
 }
