@@ -3,11 +3,12 @@
 #include <Eigen/Eigenvalues>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace contour::control {
 
-void ServoController::configure(const ServoParams& p) {
+void ServoController::validate(const ServoParams& p) {
   if (p.axes < 1 || p.axes > kMaxServoAxes) throw std::invalid_argument("servo: axes must be 1..3");
   if (!(p.period_s > 0.0)) throw std::invalid_argument("servo: period must be > 0");
   if (p.delay_cycles < 0 || p.delay_cycles > FeedDrive::kMaxDelay) {
@@ -26,6 +27,10 @@ void ServoController::configure(const ServoParams& p) {
   if (p.coupling.cp < 0.0 || p.coupling.ci_per_s < 0.0 || p.coupling.cd_s < 0.0) {
     throw std::invalid_argument("servo: coupling gains must be >= 0");
   }
+}
+
+void ServoController::configure(const ServoParams& p) {
+  validate(p);
   p_ = p;
   for (std::size_t i = 0; i < kMaxServoAxes; ++i) {
     FeedDriveParams m = p_.drive[i];
@@ -49,6 +54,44 @@ void ServoController::reset() noexcept {
     model_nd_[i].reset(0.0);
     model_d_[i].reset(0.0);
   }
+}
+
+void ServoController::check_live_compatible(const ServoParams& p) const {
+  validate(p);
+  if (p.axes != p_.axes) throw std::invalid_argument("servo: the number of axes cannot change live");
+  if (p.period_s != p_.period_s) throw std::invalid_argument("servo: the period cannot change live");
+  if (p.delay_cycles != p_.delay_cycles || p.delay_compensation != p_.delay_compensation) {
+    throw std::invalid_argument("servo: delay compensation cannot change live");
+  }
+  for (std::size_t i = 0; i < kMaxServoAxes; ++i) {
+    const FeedDriveParams& a = p.drive[i];
+    const FeedDriveParams& b = p_.drive[i];
+    if (a.gain_per_s != b.gain_per_s || a.tau_s != b.tau_s) {
+      throw std::invalid_argument("servo: drive model (gain, tau) of axis " + std::to_string(i) +
+                                  " cannot change live");
+    }
+  }
+}
+
+void ServoController::set_gains(const ServoParams& p) noexcept {
+  const bool pid_old = p_.law == AxisLaw::kPid;
+  const bool pid_new = p.law == AxisLaw::kPid;
+  for (int i = 0; i < p_.axes; ++i) {
+    const auto s = static_cast<std::size_t>(i);
+    // Axis integrator: keep Ki * ia.
+    const double ki_old = pid_old ? p_.axis[s].ki_per_s : 0.0;
+    const double ki_new = pid_new ? p.axis[s].ki_per_s : 0.0;
+    ia_[i] = (ki_old > 0.0 && ki_new > 0.0) ? ia_[i] * ki_old / ki_new : 0.0;
+    // Coupling integrator: keep Ci * ic.
+    const double ci_old = p_.coupling.enable ? p_.coupling.ci_per_s : 0.0;
+    const double ci_new = p.coupling.enable ? p.coupling.ci_per_s : 0.0;
+    ic_[i] = (ci_old > 0.0 && ci_new > 0.0) ? ic_[i] * ci_old / ci_new : 0.0;
+  }
+  // Everything structural stays (checked off-RT); only the gain fields are copied, so the Smith
+  // predictor models keep their parameters and history.
+  p_.law = p.law;
+  p_.axis = p.axis;
+  p_.coupling = p.coupling;
 }
 
 Vec3 ServoController::predict(const Vec3& p_meas_mm) const noexcept {

@@ -87,6 +87,23 @@ class ServoController {
   // Zero integrators and predictor, tool at rest at p_mm.
   void reset() noexcept;
 
+  // Live gains (issue 9 "retune live"): the checks configure() makes, without touching any state.
+  // Throws std::invalid_argument naming the problem.
+  static void validate(const ServoParams& p);
+  // Throws std::invalid_argument when `p` differs from the active set in a part that cannot change
+  // while the controller runs: axes, period, drive models, delay_cycles, delay_compensation (the
+  // Smith predictor's model and history are built from them). Setup-time (non-RT).
+  void check_live_compatible(const ServoParams& p) const;
+  // Swaps the gains (axis kp/ki/kd/ff/u_max, law, coupling gains and enable) and KEEPS the state:
+  // axis and coupling integrators, previous errors (derivative terms), Smith predictor history.
+  // Bumpless in the integral part: each integrator is rescaled so that its contribution to the
+  // command (Ki * I) is the same before and after the swap; a contribution that the new set drops
+  // (Ki or Ci = 0, law P, coupling off) is cleared, and an integrator that did not contribute
+  // before restarts from 0. The proportional/derivative terms change with their gains (a command
+  // step of dKp * e, unavoidable without a gain ramp). Precondition: validate(p) and
+  // check_live_compatible(p) passed (debug assert only). RT: noexcept, no allocation, O(axes).
+  void set_gains(const ServoParams& p) noexcept;
+
   // P_hat: the position the command computed now will meet (Smith predictor), mm.
   [[nodiscard]] Vec3 predict(const Vec3& p_meas_mm) const noexcept;
 

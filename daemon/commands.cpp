@@ -97,6 +97,11 @@ json Daemon::status_json() {
          {"underruns", st.underruns},
          {"missed_tpdos", st.missed_tpdos},
          {"velocity_clamps", st.velocity_clamps},
+         {"accel_clamps", st.accel_clamps},
+         {"limits_generation", st.limits_generation},
+         {"spindle_rpm_cmd", st.spindle_rpm_cmd},
+         {"force", force_json()},
+         {"gpio", gpio_json()},
          {"telemetry_dropped", writer_->dropped()},
          {"events_dropped", logger_->dropped()},
          {"timing",
@@ -115,6 +120,120 @@ json Daemon::status_json() {
                   {"value", st.fault_value}, {"limit", st.fault_limit}};
   }
   return j;
+}
+
+json Daemon::force_json() {
+  const auto st = loop_->status();
+  json j{{"available", st.force_available},
+         {"state", drivers::modbus::to_string(st.force_state)},
+         {"fx_n", st.force_xyz_N[0]},
+         {"fy_n", st.force_xyz_N[1]},
+         {"fz_n", st.force_xyz_N[2]},
+         {"force_n", st.force_N},
+         {"age_ms", st.force_age_s * 1e3},
+         {"seq", st.force_seq},
+         {"enabled", st.force_requested},
+         {"active", st.force_active},
+         {"status", control::to_string(st.force_status)},
+         {"reference_n", st.force_ref_N},
+         {"feed_override", st.force_override},
+         {"fallback_active", st.force_fallback},
+         {"fallbacks", st.force_fallbacks},
+         {"fallback", cfg_.force.limits.fallback == control::ForceFallback::kHold ? "hold"
+                                                                                   : "programmed_feed"}};
+  if (io_) {
+    if (const auto d = io_->dynamometer_status()) {
+      j["dynamometer"] = {{"connected", d->connected},       {"polls", d->polls},
+                          {"samples", d->samples},           {"timeouts", d->timeouts},
+                          {"exceptions", d->exceptions},     {"protocol_errors", d->protocol_errors},
+                          {"connection_errors", d->connection_errors},
+                          {"reconnects", d->reconnects},     {"invalid", d->invalid},
+                          {"last_error", d->last_error}};
+    }
+  }
+  return j;
+}
+
+json Daemon::gpio_json() {
+  const auto st = loop_->status();
+  json j{{"enabled", io_ && io_->has_gpio()},
+         {"estop_input", st.estop_input},
+         {"requested",
+          {{"drive_enable", st.out_drive_enable}, {"spindle_enable", st.out_spindle_enable},
+           {"coolant_mist", st.out_mist}, {"coolant_flood", st.out_flood}}}};
+  if (io_) {
+    if (const auto g = io_->gpio_state()) {
+      j["backend"] = cfg_.gpio.backend;
+      j["lines"] = {{"estop_asserted", g->estop_asserted}, {"estop_tripped", g->estop_tripped},
+                    {"drive_enable", g->drive_enable},     {"spindle_enable", g->spindle_enable},
+                    {"coolant_mist", g->coolant_mist},     {"coolant_flood", g->coolant_flood},
+                    {"alive", g->alive}};
+      j["alive_toggles"] = io_->alive_toggles();
+    }
+  }
+  return j;
+}
+
+json Daemon::cmd_force(const json& req) {
+  only_keys(req, {"enable", "action", "reference_N", "reference_n"});
+  if (!loop_->force_configured()) {
+    throw CommandError("force: no force source (configure the `dynamometer:` section)");
+  }
+  int on = -1;
+  if (req.contains("enable")) {
+    if (!req["enable"].is_boolean()) throw CommandError("argument 'enable' must be true or false");
+    on = req["enable"].get<bool>() ? 1 : 0;
+  }
+  if (req.contains("action")) {
+    const json& a = req["action"];
+    if (!a.is_string() || (a != "on" && a != "off")) {
+      throw CommandError("argument 'action' must be \"on\" or \"off\"");
+    }
+    const int v = a == "on" ? 1 : 0;
+    if (on >= 0 && on != v) throw CommandError("arguments 'enable' and 'action' disagree");
+    on = v;
+  }
+  double ref = std::nan("");
+  for (const char* k : {"reference_N", "reference_n"}) {
+    if (req.contains(k)) {
+      // Keep below the force ceiling: a reference at or above it would hold the feed at once.
+      ref = number_arg(req, k, 0.0, cfg_.force.limits.force_ceiling_N);
+    }
+  }
+  if (on < 0 && std::isnan(ref)) {
+    return force_json();  // query
+  }
+  const auto c0 = loop_->status().cycle;
+  if (!loop_->post({CommandKind::kForce, on, ref, 0.0})) throw CommandError("command queue full; retry");
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+  while (loop_->status().cycle < c0 + 2 && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return force_json();
+}
+
+json Daemon::cmd_sim_gpio(const json& req) {
+  only_keys(req, {"line", "level"});
+  if (!io_ || io_->sim_gpio() == nullptr) {
+    throw CommandError("sim_gpio: only with `gpio.backend: sim`");
+  }
+  const json& l = arg(req, "line");
+  if (!l.is_string()) throw CommandError("argument 'line' must be a string (role or line name)");
+  const json& v = arg(req, "level");
+  bool high = false;
+  if (v.is_boolean()) {
+    high = v.get<bool>();
+  } else if (v.is_number_integer() && (v.get<long>() == 0 || v.get<long>() == 1)) {
+    high = v.get<long>() == 1;
+  } else {
+    throw CommandError("argument 'level' must be 0 or 1 (physical level)");
+  }
+  const std::string key = io_->sim_key(l.get<std::string>());
+  if (key.empty()) throw CommandError("sim_gpio: unknown line '" + l.get<std::string>() + "'");
+  if (key != io_->sim_key("estop")) throw CommandError("sim_gpio: '" + key + "' is not an input");
+  io_->sim_gpio()->set_input_level(key, high);
+  spdlog::warn("sim_gpio: {} set to physical level {}", key, high ? 1 : 0);
+  return {{"line", key}, {"level", high ? 1 : 0}};
 }
 
 json Daemon::result_json(std::uint64_t job) {
@@ -230,7 +349,7 @@ json Daemon::cmd_load(const json& req) {
 json Daemon::cmd_gains(const json& req) {
   only_keys(req, {"set", "op"});
   auto params_json = [this]() {
-    const auto& p = loop_->active_params();
+    const control::ServoParams p = loop_->active_params();
     json kp = json::array(), ki = json::array(), kd = json::array(), ff = json::array();
     for (int i = 0; i < p.axes; ++i) {
       kp.push_back(p.axis[static_cast<std::size_t>(i)].kp);
@@ -248,9 +367,8 @@ json Daemon::cmd_gains(const json& req) {
   if (!req.contains("set")) return params_json();
   const json& set = req["set"];
   if (!set.is_object() || set.empty()) throw CommandError("'set' must be a non-empty object of gains");
-  if (loop_->status().state == MachineState::kRunning) {
-    throw CommandError("gains cannot change while RUNNING (hold first): the controller state restarts");
-  }
+  // Allowed in every state: the loop swaps with ServoController::set_gains at a cycle boundary,
+  // keeping the controller state (integrators rescaled: bumpless integral contribution).
   control::ServoParams p = loop_->active_params();
   auto per_axis = [&](const std::string& key, double control::AxisGains::*field, double lo, double hi) {
     const json& v = set[key];
@@ -458,6 +576,9 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     if (st.state != S::kFault && st.state != S::kEstop) {
       throw CommandError("reset is only for FAULT or ESTOP (state " + state_name() + ")");
     }
+    if (io_ && !io_->reset_estop()) {
+      throw CommandError("reset refused: the E-stop input is still asserted (release it first)");
+    }
     const MachineState now = post_and_wait({CommandKind::kReset}, st.state, 1.0);
     if (now == S::kFault || now == S::kEstop) {
       throw CommandError("reset refused: the cause (" + std::string(to_string(st.cause)) + ") is still present");
@@ -496,9 +617,8 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     else server_->unsubscribe(client.id, t.get<std::string>());
     return {{"topic", t}};
   }
-  if (cmd == "force") {
-    throw CommandError("force: the force channel is not wired into contourd yet");
-  }
+  if (cmd == "force") return cmd_force(req);
+  if (cmd == "sim_gpio") return cmd_sim_gpio(req);
   if (cmd == "shutdown") {
     only_keys(req, {});
     spdlog::info("shutdown requested by socket client pid {} uid {}", client.pid, client.uid);

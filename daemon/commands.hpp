@@ -10,11 +10,15 @@
 //   jog    {axis, velocity_mm_min, distance_mm}     READY, no program loaded, target in limits
 //   set-position | home {axis, position_mm}         DISABLED/READY (sim and absolute encoders)
 //   gains  [{set: {kp, ki_per_s, kd_s, ff, cp, ci_per_s, cd_s, coupling}}]  validated, stability
-//                                            checked, swapped at a cycle boundary (not while RUNNING)
+//                                            checked, swapped at a cycle boundary in any state
+//                                            (controller state kept, bumpless integral)
 //   override {percent}                       feed override
 //   record {action: start|stop [, path]}     telemetry CSV
 //   subscribe | unsubscribe {topic: telemetry|events}
-//   force                                    not implemented yet (error reply)
+//   force  [{enable: bool | action: on|off, reference_N}]   force control (needs `dynamometer:`);
+//                                            no argument: force status
+//   sim_gpio {line: role|name, level: 0|1}   gpio.backend sim only: set a simulated input's
+//                                            physical level (e.g. press the E-stop: estop, 0)
 //   shutdown                                 controlled stop, drives disabled, exit 0
 // Unknown arguments, wrong types and out-of-range values are errors naming the argument.
 #include <nlohmann/json.hpp>

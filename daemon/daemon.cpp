@@ -57,7 +57,16 @@ void Daemon::on_event(const RtEvent& e, const std::string& text) {
 void Daemon::start_components() {
   bus_ = make_axis_bus(cfg_, [](const std::string& m) { spdlog::info("{}", m); });
   bus_->start();
-  loop_ = std::make_unique<ServoLoop>(cfg_, *bus_);
+  io_ = std::make_unique<IoChannels>(cfg_, [](const std::string& m) { spdlog::info("{}", m); });
+  if (!io_->has_estop_input() && cfg_.bus.type != "sim") {
+    spdlog::warn("no gpio E-stop input configured: the software does not see the machine's "
+                 "E-stop chain (the hardware chain still acts on the drives)");
+  }
+  loop_ = std::make_unique<ServoLoop>(cfg_, *bus_, 4096, io_.get());
+  io_->start([this] {
+    const auto st = loop_->status();
+    return IoOutputs{st.out_drive_enable, st.out_spindle_enable, st.out_mist, st.out_flood, st.cycle};
+  });
   writer_ = std::make_unique<TelemetryWriter>(loop_->telemetry(), loop_->period_s());
   writer_->set_stream(
       [this](const TelemetrySample& s) {
@@ -65,7 +74,9 @@ void Daemon::start_components() {
         server_->publish("telemetry",
                          {{"event", "telemetry"}, {"cycle", s.cycle}, {"state", to_string(s.state)},
                           {"ref_mm", s.ref_mm}, {"act_mm", s.act_mm}, {"eps_mm", s.eps_mm},
-                          {"line", s.line}, {"progress_mm", s.progress_mm}});
+                          {"line", s.line}, {"progress_mm", s.progress_mm},
+                          {"override", s.override_applied}, {"force_n", s.force_N},
+                          {"force_override", s.force_override}, {"spindle_rpm", s.spindle_rpm}});
       },
       100);
   writer_->start();
@@ -107,6 +118,7 @@ void Daemon::stop_components() {
     rt_stop_.store(true, std::memory_order_release);
     rt_.join();
   }
+  if (io_) io_->stop();  // after the loop: outputs to their safe state
   if (bus_) bus_->stop();
   if (writer_) writer_->stop();
   if (logger_) logger_->stop();
@@ -180,25 +192,45 @@ void Daemon::reload_config() {
     const auto p = config::make_servo_params(n.control, n.control.controller, dp,
                                              static_cast<int>(cfg_.machine.axes.size()),
                                              cfg_.machine.period_s, delay);
-    if (loop_->status().state == MachineState::kRunning) {
-      spdlog::warn("SIGHUP: gains not changed while RUNNING (hold or finish first, then SIGHUP)");
-    } else {
-      const auto gen = loop_->stage_gains(p);
-      cfg_.control = n.control;
-      spdlog::info("SIGHUP: control gains staged (generation {})", gen);
-    }
+    // Live in every state: set_gains keeps the controller state (bumpless integral).
+    const auto gen = loop_->stage_gains(p);
+    cfg_.control = n.control;
+    spdlog::info("SIGHUP: control gains staged (generation {}, state {})", gen,
+                 to_string(loop_->status().state));
   } catch (const std::exception& e) {
     spdlog::error("SIGHUP: gains rejected: {}", e.what());
+  }
+  // Live safety limits: safety band/limits and the per-axis velocity/acceleration clamps.
+  if (n.machine.axes.size() == cfg_.machine.axes.size()) {
+    try {
+      const LiveLimits l = live_limits_from(n);
+      const LiveLimits cur = loop_->active_limits();
+      if (l.ferror_mm != cur.ferror_mm || l.min_ferror_mm != cur.min_ferror_mm ||
+          l.contour_error_limit_mm != cur.contour_error_limit_mm ||
+          l.stop_decel_mm_s2 != cur.stop_decel_mm_s2 || l.max_velocity_mm_s != cur.max_velocity_mm_s ||
+          l.max_accel_mm_s2 != cur.max_accel_mm_s2) {
+        const auto gen = loop_->stage_limits(l);
+        cfg_.safety.ferror_mm = n.safety.ferror_mm;
+        cfg_.safety.min_ferror_mm = n.safety.min_ferror_mm;
+        cfg_.safety.contour_error_limit_mm = n.safety.contour_error_limit_mm;
+        cfg_.safety.stop_decel_mm_s2 = n.safety.stop_decel_mm_s2;
+        for (std::size_t i = 0; i < cfg_.machine.axes.size(); ++i) {
+          cfg_.machine.axes[i].max_velocity_mm_min = n.machine.axes[i].max_velocity_mm_min;
+          cfg_.machine.axes[i].max_accel_mm_s2 = n.machine.axes[i].max_accel_mm_s2;
+        }
+        spdlog::info("SIGHUP: safety limits staged (generation {})", gen);
+      }
+    } catch (const std::exception& e) {
+      spdlog::error("SIGHUP: safety limits rejected: {}", e.what());
+    }
   }
   // Everything else needs a restart (the loop holds its limits in a copy taken at start-up).
   if (n.loop.period_us != cfg_.loop.period_us || n.loop.priority != cfg_.loop.priority ||
       n.loop.cpu != cfg_.loop.cpu) {
     spdlog::warn("SIGHUP: loop: changes need a restart");
   }
-  if (n.safety.ferror_mm != cfg_.safety.ferror_mm || n.safety.min_ferror_mm != cfg_.safety.min_ferror_mm ||
-      n.safety.contour_error_limit_mm != cfg_.safety.contour_error_limit_mm ||
-      n.safety.stop_decel_mm_s2 != cfg_.safety.stop_decel_mm_s2) {
-    spdlog::warn("SIGHUP: safety: limit changes need a restart (not live yet)");
+  if (n.safety.missed_tpdo_streak != cfg_.safety.missed_tpdo_streak) {
+    spdlog::warn("SIGHUP: safety.missed_tpdo_streak: changes need a restart");
   }
   if (n.machine.axes.size() != cfg_.machine.axes.size()) spdlog::warn("SIGHUP: machine: changes need a restart");
   if (n.socket.path != cfg_.socket.path || n.socket.mode != cfg_.socket.mode) {

@@ -6,9 +6,12 @@
 // permitted), planner (per program), telemetry writer, event logger, command server, spdlog's
 // async worker. All non-RT threads are created from main, which stays SCHED_OTHER.
 // Signals: SIGTERM/SIGINT -> controlled stop, drives disabled, files flushed, exit 0;
-// SIGHUP -> re-read the config file: gains are validated and swapped at a cycle boundary (not
-// while RUNNING: ServoController::configure restarts the controller state); every other changed
-// section is logged as needing a restart.
+// SIGHUP -> re-read the config file: gains and the live safety limits (following-error band,
+// contour-error limit, stop deceleration, per-axis velocity/acceleration clamps) are validated and
+// swapped at a cycle boundary in any state, RUNNING included (ServoController::set_gains keeps the
+// controller state); every other changed section is logged as needing a restart.
+// I/O: IoChannels (io_channels.hpp) owns the dynamometer reader and the GPIO lines; the loop
+// reads them through RtIo; IoChannels' supervisor thread applies the loop's GPIO outputs.
 // systemd: READY=1 once the drives are enabled and the loop runs; WATCHDOG=1 only while the loop's
 // cycle counter advances.
 #include <atomic>
@@ -26,6 +29,7 @@
 #include "daemon/axis_bus.hpp"
 #include "daemon/command_server.hpp"
 #include "daemon/event_log.hpp"
+#include "daemon/io_channels.hpp"
 #include "daemon/planner.hpp"
 #include "daemon/rt_timing.hpp"
 #include "daemon/servo_loop.hpp"
@@ -76,10 +80,15 @@ class Daemon {
   nlohmann::json cmd_jog(const nlohmann::json& req);
   nlohmann::json cmd_set_position(const nlohmann::json& req);
   nlohmann::json cmd_record(const nlohmann::json& req);
+  nlohmann::json cmd_force(const nlohmann::json& req);
+  nlohmann::json cmd_sim_gpio(const nlohmann::json& req);
+  nlohmann::json force_json();
+  nlohmann::json gpio_json();
 
   config::Config cfg_;
   DaemonOptions opt_;
   std::unique_ptr<AxisBus> bus_;
+  std::unique_ptr<IoChannels> io_;  // before loop_: the loop holds a pointer to it
   std::unique_ptr<ServoLoop> loop_;
   std::unique_ptr<TelemetryWriter> writer_;
   std::unique_ptr<EventLogger> logger_;

@@ -72,6 +72,7 @@ std::string_view to_string(CommandKind k) noexcept {
     case CommandKind::kSetOverride: return "override";
     case CommandKind::kRecordFlag: return "record";
     case CommandKind::kSetPosition: return "set-position";
+    case CommandKind::kForce: return "force";
   }
   return "?";
 }
@@ -93,6 +94,8 @@ std::string describe(const RtEvent& e) {
         o << ": reference " << e.value << " mm beyond limit " << e.limit << " mm";
       } else if (e.cause == FaultCause::kMissedTpdo) {
         o << ": " << e.value << " missed TPDOs in a row";
+      } else if (e.cause == FaultCause::kForceStale) {
+        o << ": sample age " << e.value << " s > " << e.limit << " s (or invalid)";
       }
       break;
     case EventKind::kUnderrun: o << "segment queue underrun: feed hold on the path at "
@@ -104,6 +107,20 @@ std::string describe(const RtEvent& e) {
     case EventKind::kCommandRefused:
       o << "command '" << to_string(e.command) << "' refused in state " << to_string(e.from);
       break;
+    case EventKind::kForceOn: o << "force control on, reference " << e.value << " N"; break;
+    case EventKind::kForceOff: o << "force control off"; break;
+    case EventKind::kForceFallback:
+      o << "force sample stale/invalid (age " << e.value << " s, limit " << e.limit
+        << " s): fallback "
+        << control::to_string(static_cast<control::ForceStatus>(e.axis));
+      break;
+    case EventKind::kForceCeiling:
+      o << "force " << e.value << " N >= ceiling " << e.limit << " N: feed hold";
+      break;
+    case EventKind::kForceRecovered:
+      o << "force samples valid again (force control stays off until 'force on')";
+      break;
+    case EventKind::kLimitsSwapped: o << "safety limits generation " << e.value << " active"; break;
   }
   return o.str();
 }
@@ -134,7 +151,8 @@ void EventLogger::drain() {
     if (e.kind == EventKind::kFault) {
       spdlog::error("{}", text);
     } else if (e.kind == EventKind::kCommandRefused || e.kind == EventKind::kUnderrun ||
-               e.kind == EventKind::kProgramAborted) {
+               e.kind == EventKind::kProgramAborted || e.kind == EventKind::kForceFallback ||
+               e.kind == EventKind::kForceCeiling) {
       spdlog::warn("{}", text);
     } else {
       spdlog::info("{}", text);

@@ -28,7 +28,52 @@ control::ServoParams servo_params_from(const config::Config& cfg) {
                                    cfg.machine.period_s, delay);
 }
 
+// Force design from `force:` with the loop period (force_config.hpp: period_s is the user's).
+control::ForceDesignParams force_design_params(const config::Config& cfg) {
+  control::ForceDesignParams dp = cfg.force.design;
+  dp.period_s = cfg.machine.period_s;
+  return dp;
+}
+
 }  // namespace
+
+LiveLimits live_limits_from(const config::Config& cfg) {
+  LiveLimits l;
+  l.ferror_mm = cfg.safety.ferror_mm;
+  l.min_ferror_mm = cfg.safety.min_ferror_mm;
+  l.contour_error_limit_mm = cfg.safety.contour_error_limit_mm;
+  l.stop_decel_mm_s2 = cfg.safety.stop_decel_mm_s2;
+  for (std::size_t i = 0; i < 3; ++i) {
+    if (i < cfg.machine.axes.size()) {
+      l.max_velocity_mm_s[i] = cfg.machine.axes[i].max_velocity_mm_min / 60.0;
+      l.max_accel_mm_s2[i] = cfg.machine.axes[i].max_accel_mm_s2;
+    } else {
+      l.max_velocity_mm_s[i] = 1.0;
+      l.max_accel_mm_s2[i] = 1.0;
+    }
+  }
+  return l;
+}
+
+void validate(const LiveLimits& l, int axes) {
+  auto positive = [](double v, const std::string& name) {
+    if (!std::isfinite(v) || !(v > 0.0)) {
+      throw std::invalid_argument("limits: " + name + " = " + std::to_string(v) + " must be > 0");
+    }
+  };
+  positive(l.ferror_mm, "safety.ferror_mm");
+  positive(l.min_ferror_mm, "safety.min_ferror_mm");
+  positive(l.contour_error_limit_mm, "safety.contour_error_limit_mm");
+  positive(l.stop_decel_mm_s2, "safety.stop_decel_mm_s2");
+  if (l.min_ferror_mm > l.ferror_mm) {
+    throw std::invalid_argument("limits: safety.min_ferror_mm must be <= safety.ferror_mm");
+  }
+  for (int i = 0; i < axes && i < 3; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    positive(l.max_velocity_mm_s[a], "machine.axes[" + std::to_string(i) + "].max_velocity");
+    positive(l.max_accel_mm_s2[a], "machine.axes[" + std::to_string(i) + "].max_accel_mm_s2");
+  }
+}
 
 SegmentRecord to_record(const control::PlannedSegment& s) noexcept {
   SegmentRecord r;
@@ -72,9 +117,12 @@ void from_record(const SegmentRecord& r, control::PlannedSegment& s) noexcept {
   s.message_id = r.message_id;
 }
 
-ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_capacity)
+ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_capacity,
+                     RtIo* io, LoopOptions opt)
     : cfg_(cfg),
       bus_(bus),
+      io_(io),
+      opt_(opt),
       commands_(256),
       events_(event_capacity),
       telemetry_(static_cast<std::size_t>(cfg.telemetry.ring_capacity)) {
@@ -85,20 +133,47 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
     if (i < cfg.machine.axes.size()) {
       const auto& a = cfg.machine.axes[i];
       gain_per_s_[i] = a.drive.gain_per_s;
-      vmax_mm_s_[i] = a.max_velocity_mm_min / 60.0;
+      tau_s_[i] = a.drive.tau_s;
       min_mm_[i] = a.min_mm;
       max_mm_[i] = a.max_mm;
     } else {
       min_mm_[i] = -1e300;
       max_mm_[i] = 1e300;
-      vmax_mm_s_[i] = 1.0;
     }
   }
-  active_params_ = servo_params_from(cfg);
-  ctrl_.configure(active_params_);
-  staged_ctrl_ = ctrl_;
+  limits_ = live_limits_from(cfg);
+  validate(limits_, axes_);
+  applied_limits_ = staged_limits_ = limits_;
+  base_params_ = servo_params_from(cfg);
+  ctrl_.configure(base_params_);
+  applied_params_ = staged_params_ = base_params_;
   model_.configure(config::make_model_params(cfg.control));
+  // Force channel: configured whenever there is a force source (force control can then be
+  // switched on by command even when force.enable is false at start-up).
+  if (io_ != nullptr && io_->has_force()) {
+    force_.configure(control::design_force_2dof(force_design_params(cfg)), cfg.force.limits);
+    force_configured_ = true;
+    force_requested_ = cfg.force.enable;
+  }
+  force_ref_N_ = cfg.force.reference_N;
   publish();
+}
+
+control::ServoParams ServoLoop::active_params() const {
+  std::lock_guard lk(producer_mu_);
+  // staged_params_ is active once the loop has taken it (its generation is published).
+  if (status().gains_generation == staged_generation_.load(std::memory_order_relaxed)) {
+    return staged_params_;
+  }
+  return applied_params_;
+}
+
+LiveLimits ServoLoop::active_limits() const {
+  std::lock_guard lk(producer_mu_);
+  if (status().limits_generation == staged_limits_generation_.load(std::memory_order_relaxed)) {
+    return staged_limits_;
+  }
+  return applied_limits_;
 }
 
 bool ServoLoop::post(const LoopCommand& c) {
@@ -107,8 +182,8 @@ bool ServoLoop::post(const LoopCommand& c) {
 }
 
 std::uint64_t ServoLoop::stage_gains(const control::ServoParams& p) {
-  control::ServoController check;
-  check.configure(p);  // throws std::invalid_argument
+  control::ServoController check(base_params_);
+  check.check_live_compatible(p);  // throws std::invalid_argument
   std::lock_guard lk(producer_mu_);
   // Wait for the loop to take the previously staged set (one cycle); bounded.
   for (int i = 0; i < 2000 && staged_ready_.load(std::memory_order_acquire); ++i) {
@@ -117,11 +192,28 @@ std::uint64_t ServoLoop::stage_gains(const control::ServoParams& p) {
   if (staged_ready_.load(std::memory_order_acquire)) {
     throw std::runtime_error("servo loop is not running: previous gains still staged");
   }
-  staged_ctrl_ = check;
+  applied_params_ = staged_params_;  // taken by the loop: it is the active set now
   staged_params_ = p;
   const std::uint64_t gen = staged_generation_.load(std::memory_order_relaxed) + 1;
   staged_generation_.store(gen, std::memory_order_relaxed);
   staged_ready_.store(true, std::memory_order_release);
+  return gen;
+}
+
+std::uint64_t ServoLoop::stage_limits(const LiveLimits& l) {
+  validate(l, axes_);  // throws std::invalid_argument
+  std::lock_guard lk(producer_mu_);
+  for (int i = 0; i < 2000 && staged_limits_ready_.load(std::memory_order_acquire); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  if (staged_limits_ready_.load(std::memory_order_acquire)) {
+    throw std::runtime_error("servo loop is not running: previous limits still staged");
+  }
+  applied_limits_ = staged_limits_;
+  staged_limits_ = l;
+  const std::uint64_t gen = staged_limits_generation_.load(std::memory_order_relaxed) + 1;
+  staged_limits_generation_.store(gen, std::memory_order_relaxed);
+  staged_limits_ready_.store(true, std::memory_order_release);
   return gen;
 }
 
@@ -188,6 +280,16 @@ void ServoLoop::hold_here() noexcept {
   jogging_ = false;
 }
 
+void ServoLoop::enter_estop(FaultCause cause) noexcept {
+  const Transition t = sm_.estop(cause);
+  if (!t.accepted) return;
+  emit(EventKind::kFault, cause);
+  transition(t, cause);
+  if (job_ != nullptr) detach_job(false);
+  jogging_ = false;
+  v_cmd_.fill(0.0);
+}
+
 void ServoLoop::apply_command(const LoopCommand& c) noexcept {
   const MachineState st = sm_.state();
   auto refuse = [&]() {
@@ -223,6 +325,7 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       model_.reset();
       ctrl_.reset();
       iout_ = control::InterpOutput{};
+      planned_progress_mm_ = 0.0;
       transition(sm_.apply(Request::kRun), FaultCause::kNone);
       break;
     case CommandKind::kHold:
@@ -244,26 +347,19 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       } else if (jogging_) {
         // Brake the jog at the axis deceleration.
         const auto a = static_cast<std::size_t>(jog_axis_);
-        const double dec = cfg_.machine.axes[a].max_accel_mm_s2;
+        const double dec = limits_.max_accel_mm_s2[a];
         const double dir = jog_target_mm_ >= ref_[jog_axis_] ? 1.0 : -1.0;
         jog_target_mm_ = ref_[jog_axis_] + dir * jog_speed_mm_s_ * jog_speed_mm_s_ / (2.0 * dec);
       } else if (job_ != nullptr && st == MachineState::kReady) {
         detach_job(false);  // unload a program that was never started
       }
       break;
-    case CommandKind::kEstop: {
-      const Transition t = sm_.estop(FaultCause::kEstopCommand);
-      if (t.accepted) {
-        emit(EventKind::kFault, FaultCause::kEstopCommand);
-        transition(t, FaultCause::kEstopCommand);
-        if (job_ != nullptr) detach_job(false);
-        jogging_ = false;
-        v_cmd_.fill(0.0);
-      }
+    case CommandKind::kEstop:
+      enter_estop(FaultCause::kEstopCommand);
       break;
-    }
     case CommandKind::kReset: {
-      bool gone = !fb_.heartbeat_lost && !fb_.bus_error;
+      // The E-stop input latch is cleared by the non-RT side (IoChannels::reset_estop) first.
+      bool gone = !fb_.heartbeat_lost && !fb_.bus_error && !(io_ != nullptr && io_->estop_tripped());
       for (int i = 0; i < axes_; ++i) gone = gone && !fb_.axis[static_cast<std::size_t>(i)].fault;
       const Transition t = sm_.reset(gone);
       if (!t.accepted) {
@@ -271,6 +367,7 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
         break;
       }
       transition(t, FaultCause::kNone);
+      force_fallback_ = false;
       fault_axis_ = -1;
       fault_value_ = fault_limit_ = 0.0;
       missed_streak_.fill(0);
@@ -307,18 +404,39 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       act_[c.axis] = c.a;
       hold_here();
       break;
+    case CommandKind::kForce:
+      if (!force_configured_) {
+        refuse();
+        break;
+      }
+      if (std::isfinite(c.a)) force_ref_N_ = c.a;
+      if (c.axis == 1) {
+        force_requested_ = true;
+        force_fallback_ = false;  // `force on` clears a latched fallback (ForceController::enable)
+      } else if (c.axis == 0) {
+        force_requested_ = false;
+        force_fallback_ = false;
+        if (force_.active()) emit(EventKind::kForceOff);
+        force_.disable();
+      }
+      break;
   }
 }
 
 void ServoLoop::cycle() noexcept {
-  // 1. Cycle boundary: the staged gains.
+  // 1. Cycle boundary: the staged gains (state kept: ServoController::set_gains) and limits.
   if (staged_ready_.load(std::memory_order_acquire)) {
-    ctrl_ = staged_ctrl_;
-    active_params_ = staged_params_;
+    ctrl_.set_gains(staged_params_);
     gains_generation_ = staged_generation_.load(std::memory_order_relaxed);
     gains_cycle_ = cycle_;
     staged_ready_.store(false, std::memory_order_release);
     emit(EventKind::kGainsSwapped, FaultCause::kNone, -1, static_cast<double>(gains_generation_));
+  }
+  if (staged_limits_ready_.load(std::memory_order_acquire)) {
+    limits_ = staged_limits_;
+    limits_generation_ = staged_limits_generation_.load(std::memory_order_relaxed);
+    staged_limits_ready_.store(false, std::memory_order_release);
+    emit(EventKind::kLimitsSwapped, FaultCause::kNone, -1, static_cast<double>(limits_generation_));
   }
 
   // 2. SYNC and TPDOs.
@@ -338,6 +456,21 @@ void ServoLoop::cycle() noexcept {
   // Commands after the TPDOs, so that `reset` judges the drives' current fault bits.
   LoopCommand c;
   for (int n = 0; n < kMaxCommandsPerCycle && commands_.pop(c); ++n) apply_command(c);
+
+  // 3. Force sample and E-stop input (latched by the monitor thread): ESTOP in this cycle, so
+  // this cycle's RPDOs already carry the quick stop.
+  if (io_ != nullptr) {
+    reading_ = io_->read_force();
+    force_xyz_N_ = reading_.sample.filtered_N;
+    double sq = 0.0;
+    for (std::size_t i = 0; i < 3; ++i) {
+      if (reading_.sample.present[i]) sq += force_xyz_N_[i] * force_xyz_N_[i];
+    }
+    force_N_ = std::sqrt(sq);
+    force_age_s_ = static_cast<double>(reading_.age_ns) * 1e-9;
+    estop_input_ = io_->estop_tripped();
+    if (estop_input_) enter_estop(FaultCause::kEstopInput);
+  }
 
   MachineState st = sm_.state();
   const bool motion = st == MachineState::kReady || st == MachineState::kRunning ||
@@ -365,7 +498,9 @@ void ServoLoop::cycle() noexcept {
     }
   }
   if (job_ != nullptr && (st == MachineState::kRunning || st == MachineState::kHold)) {
-    const double ovr = (st == MachineState::kRunning && !stopping_) ? feed_override_ : 0.0;
+    // The force controller's override (step 7 of the previous cycle) scales the user's.
+    const double ovr =
+        (st == MachineState::kRunning && !stopping_) ? feed_override_ * force_override_ : 0.0;
     ist = job_->interp.step(ovr, iout_);
     ref_ = iout_.position_mm;
     const bool planner_done = job_->planner_done.load(std::memory_order_acquire);
@@ -403,11 +538,11 @@ void ServoLoop::cycle() noexcept {
     }
   } else if (jogging_ && st == MachineState::kReady) {
     const auto a = static_cast<std::size_t>(jog_axis_);
-    const double acc = cfg_.machine.axes[a].max_accel_mm_s2;
+    const double acc = limits_.max_accel_mm_s2[a];
     const double rem = jog_target_mm_ - ref_[jog_axis_];
     const double dir = rem >= 0.0 ? 1.0 : -1.0;
     const double v_brake = std::sqrt(2.0 * acc * std::abs(rem));
-    const double v_des = std::min({jog_v_mm_s_, v_brake, vmax_mm_s_[a]});
+    const double v_des = std::min({jog_v_mm_s_, v_brake, limits_.max_velocity_mm_s[a]});
     jog_speed_mm_s_ = std::min(v_des, jog_speed_mm_s_ + acc * period_s_);
     const double step = std::min(jog_speed_mm_s_ * period_s_, std::abs(rem));
     ref_[jog_axis_] += dir * step;
@@ -436,9 +571,26 @@ void ServoLoop::cycle() noexcept {
       const auto a = static_cast<std::size_t>(i);
       double v = gain_per_s_[a] * u[i];
       if (!std::isfinite(v)) v = 0.0;
-      if (std::abs(v) > vmax_mm_s_[a]) {
-        v = std::copysign(vmax_mm_s_[a], v);
+      const double vmax = limits_.max_velocity_mm_s[a];
+      if (std::abs(v) > vmax) {
+        v = std::copysign(vmax, v);
         ++clamps_;
+      }
+      // Acceleration clamp. A velocity-mode drive follows its target with the lag tau of its
+      // velocity loop, so the acceleration it will produce is (v_target - v_actual) / tau: the
+      // target is kept within v_actual +- a_max * tau. Why not |v(k) - v(k-1)| <= a_max T on the
+      // target: the coupling controller's derivative term makes the target step by ~18 mm/s per
+      // 0.5 um encoder count (Cd K BLU / T), which the drive's lag filters; a per-cycle rate
+      // limit at 2000 mm/s^2 turned that into phase lag and made the Table 2 run unstable
+      // (contour error 1.1 mm, FAULT). Like the velocity clamp it is a last-line limit the
+      // controller is not told about; it does not engage on Table 2 (status accel_clamps).
+      if (fb_.axis[a].fresh && tau_s_[a] > 0.0) {
+        const double dv = limits_.max_accel_mm_s2[a] * tau_s_[a];
+        const double va = fb_.axis[a].velocity_mm_s;
+        if (v > va + dv || v < va - dv) {
+          v = std::clamp(v, va - dv, va + dv);
+          ++accel_clamps_;
+        }
       }
       v_cmd_[a] = v;
     }
@@ -448,7 +600,7 @@ void ServoLoop::cycle() noexcept {
     double speed = 0.0;
     for (int i = 0; i < axes_; ++i) speed += v_cmd_[static_cast<std::size_t>(i)] * v_cmd_[static_cast<std::size_t>(i)];
     speed = std::sqrt(speed);
-    const double next = std::max(0.0, speed - cfg_.safety.stop_decel_mm_s2 * period_s_);
+    const double next = std::max(0.0, speed - limits_.stop_decel_mm_s2 * period_s_);
     const double scale = speed > 0.0 ? next / speed : 0.0;
     for (auto& v : v_cmd_) v *= scale;
     out.mode = next > 0.0 ? DriveMode::kEnabled : DriveMode::kDisabled;
@@ -463,6 +615,11 @@ void ServoLoop::cycle() noexcept {
     eps_.setZero();
   }
   for (int i = 0; i < axes_; ++i) out.velocity_mm_s[static_cast<std::size_t>(i)] = v_cmd_[static_cast<std::size_t>(i)];
+
+  // 7. Force controller -> feed override (applied from the next interpolator step) and spindle.
+  force_step(st);
+  out.spindle_rpm = out.mode == DriveMode::kEnabled ? spindle_rpm_cmd_ : 0.0;
+  out_ = out;
 
   // 8. RPDOs.
   bus_.write(out);
@@ -484,12 +641,13 @@ void ServoLoop::cycle() noexcept {
     if (fb_.bus_error) raise_fault(FaultCause::kBusError, -1, 1.0, 0.0);
   }
   if (motion && sm_.state() != MachineState::kFault) {
-    const double fe = cfg_.safety.ferror_mm, mfe = cfg_.safety.min_ferror_mm;
+    const double fe = limits_.ferror_mm, mfe = limits_.min_ferror_mm;
     for (int i = 0; i < axes_; ++i) {
       const auto a = static_cast<std::size_t>(i);
       // LinuxCNC: the allowed following error grows linearly with the commanded speed from
       // MIN_FERROR at standstill to FERROR at the axis' maximum velocity.
-      const double band = std::min(fe, mfe + (fe - mfe) * std::abs(v_ref[i]) / vmax_mm_s_[a]);
+      const double band =
+          std::min(fe, mfe + (fe - mfe) * std::abs(v_ref[i]) / limits_.max_velocity_mm_s[a]);
       const double err = std::abs(ref_[i] - act_[i]);
       if (err > band) {
         raise_fault(FaultCause::kFollowingError, i, err, band);
@@ -500,8 +658,8 @@ void ServoLoop::cycle() noexcept {
         break;
       }
     }
-    if (eps_norm > cfg_.safety.contour_error_limit_mm) {
-      raise_fault(FaultCause::kContourError, -1, eps_norm, cfg_.safety.contour_error_limit_mm);
+    if (eps_norm > limits_.contour_error_limit_mm) {
+      raise_fault(FaultCause::kContourError, -1, eps_norm, limits_.contour_error_limit_mm);
     }
   }
 
@@ -536,10 +694,85 @@ void ServoLoop::cycle() noexcept {
     s.state = sm_.state();
     s.recording = recording_;
     s.in_program = job_ != nullptr && (s.state == MachineState::kRunning || s.state == MachineState::kHold);
+    s.force_N = force_N_;
+    s.force_override = force_override_;
+    s.spindle_rpm = spindle_rpm_cmd_;
     telemetry_.push(s);
   }
   publish();
   ++cycle_;
+}
+
+void ServoLoop::force_step(MachineState st) noexcept {
+  const bool in_prog =
+      job_ != nullptr && (st == MachineState::kRunning || st == MachineState::kHold);
+  double programmed_rpm = 0.0;
+  if (in_prog && iout_.spindle != control::SpindleDir::kOff) {
+    programmed_rpm = iout_.spindle == control::SpindleDir::kCcw ? -iout_.spindle_rpm : iout_.spindle_rpm;
+  }
+  if (!force_configured_) {
+    force_override_ = 1.0;
+    spindle_rpm_cmd_ = programmed_rpm;
+    return;
+  }
+  const control::ForceLimits& lim = cfg_.force.limits;
+  const bool running = in_prog && st == MachineState::kRunning && !stopping_;
+  // Planned progress (the position reference of the 2-DOF controller): a ramp at the design's
+  // path speed k_v (force.plant.k_v_mm_s, speed at 100 % override) times the user's override.
+  // The design assumes the program's feed equals k_v; another feed is a model gain error in the
+  // position channel (seed 001 §3: the controller is designed for one operating point).
+  if (running) planned_progress_mm_ += cfg_.force.design.plant.k_v_mm_s * feed_override_ * period_s_;
+  if (force_requested_ && !force_fallback_ && running && !force_.active()) {
+    // Engage bumplessly from the current state (an invalid sample latches the fallback at once).
+    planned_progress_mm_ = iout_.path_progress_mm;
+    const double rpm0 = spindle_rpm_cmd_ != 0.0 ? std::abs(spindle_rpm_cmd_) : lim.spindle_nominal_rpm;
+    force_.enable({force_override_, rpm0, force_N_, iout_.path_progress_mm});
+    emit(EventKind::kForceOn, FaultCause::kNone, -1, force_ref_N_);
+  }
+  if (!running && force_.active()) {
+    // Program ended, HOLD or stopping: the path does not follow the override, so the controller
+    // would wind up against a standing tool. Off now, re-engaged bumplessly on resume / the next
+    // run (force_requested_ stays).
+    force_.disable();
+    emit(EventKind::kForceOff);
+  }
+  const bool ok = reading_.state == drivers::modbus::ForceState::kOk;
+  control::ForceInput in;
+  in.force_ref_N = force_ref_N_;
+  in.planned_progress_mm = planned_progress_mm_;
+  in.force_N = force_N_;
+  in.progress_mm = iout_.path_progress_mm;
+  in.force_valid = ok;
+  in.force_age_s = force_age_s_;
+  const control::ForceStatus prev = fout_.status;
+  fout_ = force_.step(in);
+  const bool stale_now = fout_.status == control::ForceStatus::kStaleHold ||
+                         fout_.status == control::ForceStatus::kStaleProgrammed;
+  if (stale_now && !force_fallback_ && force_requested_) {
+    force_fallback_ = true;
+    ++force_fallbacks_;
+    emit(EventKind::kForceFallback, FaultCause::kForceStale, static_cast<int>(fout_.status),
+         force_age_s_, lim.stale_age_s);
+    if (opt_.force_stale_faults) raise_fault(FaultCause::kForceStale, -1, force_age_s_, lim.stale_age_s);
+  }
+  if (fout_.status == control::ForceStatus::kCeilingHold && prev != control::ForceStatus::kCeilingHold) {
+    emit(EventKind::kForceCeiling, FaultCause::kForceCeiling, -1, force_N_, lim.force_ceiling_N);
+  }
+  if (force_fallback_ && ok && !force_ok_prev_) emit(EventKind::kForceRecovered);
+  force_ok_prev_ = ok;
+  const bool controlling = force_.active() || fout_.status == control::ForceStatus::kStaleHold ||
+                           fout_.status == control::ForceStatus::kCeilingHold;
+  if (force_requested_) {
+    force_override_ = fout_.feed_override;
+  } else {
+    // Off: back to the programmed feed at the override rate limit (no step in the path speed).
+    const double d = lim.override_rate_per_s * period_s_;
+    force_override_ = std::clamp(1.0, force_override_ - d, force_override_ + d);
+  }
+  spindle_rpm_cmd_ = (force_requested_ && controlling && in_prog)
+                         ? std::copysign(fout_.spindle_rpm, programmed_rpm != 0.0 ? programmed_rpm : 1.0)
+                         : programmed_rpm;
+  if (io_ != nullptr) io_->set_spindle_rpm(std::abs(spindle_rpm_cmd_));
 }
 
 void ServoLoop::publish() noexcept {
@@ -576,6 +809,28 @@ void ServoLoop::publish() noexcept {
   pub_.interp_holding = iout_.status == control::InterpStatus::kHolding;
   pub_.recording = recording_;
   pub_.drives_enabled = fb_.axes > 0 && fb_.axis[0].enabled;
+  pub_.accel_clamps = accel_clamps_;
+  pub_.limits_generation = limits_generation_;
+  pub_.force_available = force_configured_;
+  pub_.force_state = reading_.state;
+  pub_.force_xyz_N = force_xyz_N_;
+  pub_.force_N = force_N_;
+  pub_.force_age_s = force_age_s_;
+  pub_.force_seq = reading_.sample.seq;
+  pub_.force_requested = force_requested_;
+  pub_.force_active = force_.active();
+  pub_.force_status = fout_.status;
+  pub_.force_ref_N = force_ref_N_;
+  pub_.force_override = force_override_;
+  pub_.force_fallback = force_fallback_;
+  pub_.force_fallbacks = force_fallbacks_;
+  pub_.spindle_rpm_cmd = out_.spindle_rpm;
+  pub_.out_drive_enable = out_.mode == DriveMode::kEnabled && sm_.state() != MachineState::kEstop;
+  pub_.out_spindle_enable = out_.spindle_rpm != 0.0;
+  const bool in_prog = job_ != nullptr;
+  pub_.out_mist = in_prog && iout_.mist && sm_.state() != MachineState::kEstop;
+  pub_.out_flood = in_prog && iout_.flood && sm_.state() != MachineState::kEstop;
+  pub_.estop_input = estop_input_;
   std::atomic_thread_fence(std::memory_order_release);
   seq_.store(s0 + 2, std::memory_order_release);
 }

@@ -2,23 +2,32 @@
 // The real-time servo cycle (architecture.md "The 1 kHz cycle", issue 9 "Real-time loop").
 //
 // ServoLoop::cycle() runs ONE cycle, in this order:
-//   1. apply queued commands and a staged gains swap (cycle boundary)
-//   2. bus.begin_cycle() (SYNC), bus.read() (TPDOs; missed ones counted)
-//   3. [force sample: not wired yet]
+//   1. a staged gains/limits swap (cycle boundary; ServoController::set_gains keeps the
+//      controller state, so it is allowed in every state, RUNNING and HOLD included)
+//   2. bus.begin_cycle() (SYNC), bus.read() (TPDOs; missed ones counted), queued commands
+//   3. latest force sample and the E-stop input latch from the RtIo (io_channels.hpp), if any
 //   4. drain planned segments into the interpolator, interpolator step (override ramps for
 //      hold / stop / underrun), or the jog / hold reference outside a program
 //   5. contour-error model (push R(k), update with the Smith-predicted P_hat)
-//   6. axis + coupling controllers (control/servo_controller.hpp), v = K*u, velocity clamp
-//   7. [force controller: not wired yet]
-//   8. bus.write() (RPDOs)
-//   9. safety: following error (LinuxCNC-like band), contour error, soft limits on the reference,
-//      drive fault bits, heartbeat loss, missed-TPDO streak -> FAULT with a named cause
+//   6. axis + coupling controllers (control/servo_controller.hpp), v = K*u, velocity clamp, then
+//      acceleration clamp |v - v_actual| <= a_max * tau_drive (both counted, both live limits)
+//   7. force controller (control/force_controller.hpp) while RUNNING/HOLD with force control on:
+//      feed override (applied by the interpolator from the NEXT cycle: step 4 already ran) and
+//      spindle speed command; stale/invalid force -> the configured fallback, an RT event, and
+//      (LoopOptions::force_stale_faults) FAULT "stale force sample"
+//   8. bus.write() (RPDOs, AxisCommands::spindle_rpm)
+//   9. safety: E-stop input latch -> ESTOP in this cycle; following error (LinuxCNC-like band),
+//      contour error, soft limits on the reference, drive fault bits, heartbeat loss,
+//      missed-TPDO streak -> FAULT with a named cause
 //  10. telemetry sample into an SPSC ring (dropped, never blocking, when full)
 // cycle() is noexcept, allocation-free and lock-free and does not log: events go to an SPSC ring
 // of fixed-size records. Budget: < 50 us at 1 kHz (measured: see daemon/README.md).
 //
-// Threads: cycle() runs on the RT thread only (or the test's thread). post() and stage_gains()
-// are called from non-RT threads (a mutex serialises producers; the RT consumer never locks).
+// Threads: cycle() runs on the RT thread only (or the test's thread). post(), stage_gains() and
+// stage_limits() are called from non-RT threads (a mutex serialises producers; the RT consumer
+// never locks: the staged set is a double buffer handed over by an atomic flag).
+// Outputs that are GPIO lines (drive enable, spindle enable, coolant) are only PUBLISHED in the
+// status; the I/O supervisor thread (io_channels.hpp) sets the lines (libgpiod calls are ioctls).
 // status() is a seqlock read, callable from any thread.
 //
 // Units: mm, mm/s, s. Positions in machine coordinates.
@@ -32,7 +41,9 @@
 #include "control/contour_error.hpp"
 #include "control/fir_interpolator.hpp"
 #include "control/servo_controller.hpp"
+#include "control/force_controller.hpp"
 #include "daemon/axis_bus.hpp"
+#include "daemon/io_channels.hpp"
 #include "daemon/machine_state.hpp"
 #include "daemon/rt_timing.hpp"
 #include "daemon/spsc_ring.hpp"
@@ -82,6 +93,7 @@ enum class CommandKind : std::uint8_t {
   kEnable, kDisable, kRun, kHold, kResume, kStop, kEstop, kReset, kJog, kAttachJob,
   kSetOverride, kRecordFlag,
   kSetPosition,  // axis, a = position mm; DISABLED/READY only (bus.set_position on the RT thread)
+  kForce,        // axis: 1 = on, 0 = off, -1 = unchanged; a = reference N (NaN = unchanged)
 };
 
 // Fixed-size command record (non-RT -> RT).
@@ -96,6 +108,12 @@ struct LoopCommand {
 enum class EventKind : std::uint8_t {
   kTransition, kFault, kUnderrun, kUnderrunEnd, kProgramDone, kGainsSwapped, kCommandRefused,
   kProgramAborted,
+  kForceOn,        // value: reference N
+  kForceOff,
+  kForceFallback,  // stale/invalid force: value = age s; limit = stale age s; axis = ForceStatus
+  kForceCeiling,   // value: force N, limit: ceiling N
+  kForceRecovered, // a valid sample again after a fallback (force control stays off until `force on`)
+  kLimitsSwapped,
 };
 
 // Fixed-size event record (RT -> logger thread).
@@ -127,6 +145,9 @@ struct TelemetrySample {
   MachineState state = MachineState::kDisabled;
   bool recording = false;
   bool in_program = false;  // RUNNING/HOLD with a program attached
+  double force_N = 0.0;     // averaged (filtered) resultant force, 0 without a dynamometer
+  double force_override = 1.0;
+  double spindle_rpm = 0.0;
 };
 
 // Published status (seqlock).
@@ -159,12 +180,57 @@ struct LoopStatus {
   bool interp_holding = false;      // M0/M1/M6 hold in the program
   bool recording = false;
   bool drives_enabled = false;
+  std::uint64_t accel_clamps = 0;
+  std::uint64_t limits_generation = 0;
+  // Force channel (step 3 / 7).
+  bool force_available = false;     // an RtIo with a dynamometer is attached
+  drivers::modbus::ForceState force_state = drivers::modbus::ForceState::kNoData;
+  std::array<double, 3> force_xyz_N{};  // filtered channels (0 when not mapped)
+  double force_N = 0.0;             // resultant of the filtered channels (controller input)
+  double force_age_s = 0.0;
+  std::uint64_t force_seq = 0;
+  bool force_requested = false;     // `force on` (or force.enable at start-up)
+  bool force_active = false;        // the 2-DOF controller is regulating now
+  control::ForceStatus force_status = control::ForceStatus::kNotConfigured;
+  double force_ref_N = 0.0;
+  double force_override = 1.0;      // override from the force controller (1 when off)
+  bool force_fallback = false;      // stale/invalid fallback latched (until `force on`)
+  std::uint64_t force_fallbacks = 0;
+  double spindle_rpm_cmd = 0.0;     // AxisCommands::spindle_rpm
+  // Outputs for the GPIO lines (applied by the I/O supervisor) and the E-stop input.
+  bool out_drive_enable = false;
+  bool out_spindle_enable = false;
+  bool out_mist = false;
+  bool out_flood = false;
+  bool estop_input = false;         // RtIo latch seen by the loop
+};
+
+// Safety limits that may change live (SIGHUP, swapped like the gains). Units in the names.
+struct LiveLimits {
+  double ferror_mm = 1.0;
+  double min_ferror_mm = 0.1;
+  double contour_error_limit_mm = 0.5;
+  double stop_decel_mm_s2 = 1000.0;
+  std::array<double, 3> max_velocity_mm_s{};
+  std::array<double, 3> max_accel_mm_s2{};
+};
+LiveLimits live_limits_from(const config::Config& cfg);
+// Throws std::invalid_argument naming the field (non-finite, <= 0, min_ferror > ferror).
+void validate(const LiveLimits& l, int axes);
+
+struct LoopOptions {
+  // A stale/invalid force sample while force control is on faults the machine ("stale force
+  // sample") instead of the configured fallback. No config key yet (see daemon/README.md).
+  bool force_stale_faults = false;
 };
 
 class ServoLoop {
  public:
   // Setup: allocates everything the cycle needs. Throws on bad config (std::invalid_argument).
-  ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_capacity = 4096);
+  // io: optional force/E-stop source (not owned; must outlive the loop). Setup throws on a bad
+  // force design (std::invalid_argument).
+  ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_capacity = 4096,
+            RtIo* io = nullptr, LoopOptions opt = {});
 
   // One cycle (see the header comment). noexcept, no allocation, no lock, no logging.
   void cycle() noexcept;
@@ -174,15 +240,23 @@ class ServoLoop {
 
   // Non-RT producers. post() returns false when the command ring is full.
   bool post(const LoopCommand& c);
-  // Validates by configuring a controller (throws std::invalid_argument), then waits (up to
-  // timeout) until the previous staged set was taken and stages this one. Returns the generation.
+  // Validates (ServoController::validate + check_live_compatible; throws std::invalid_argument),
+  // waits (up to 2 s) until the previous staged set was taken and stages this one; the loop
+  // applies it at the next cycle boundary with ServoController::set_gains (state kept, bumpless
+  // integral), in any state. Returns the gains generation.
   std::uint64_t stage_gains(const control::ServoParams& p);
+  // Same for the live safety limits (validate(LiveLimits)). Returns the limits generation.
+  std::uint64_t stage_limits(const LiveLimits& l);
 
   [[nodiscard]] LoopStatus status() const noexcept;
   [[nodiscard]] CycleStats& stats() noexcept { return stats_; }
   SpscRing<RtEvent>& events() noexcept { return events_; }
   SpscRing<TelemetrySample>& telemetry() noexcept { return telemetry_; }
-  [[nodiscard]] const control::ServoParams& active_params() const noexcept { return active_params_; }
+  // The gains the loop runs with now (or, between staging and the next cycle, the previous set).
+  // Non-RT (takes the producer mutex); a copy, never a reference into RT-owned data.
+  [[nodiscard]] control::ServoParams active_params() const;
+  [[nodiscard]] LiveLimits active_limits() const;
+  [[nodiscard]] bool force_configured() const noexcept { return force_configured_; }
   [[nodiscard]] double period_s() const noexcept { return period_s_; }
   [[nodiscard]] int axes() const noexcept { return axes_; }
 
@@ -195,27 +269,57 @@ class ServoLoop {
   void detach_job(bool ok) noexcept;
   void hold_here() noexcept;  // reference := current measured position, controller state reset
   void publish() noexcept;
+  void force_step(MachineState st) noexcept;
+  void enter_estop(FaultCause cause) noexcept;
 
   const config::Config cfg_;
   AxisBus& bus_;
+  RtIo* io_ = nullptr;
+  LoopOptions opt_{};
   int axes_ = 3;
   double period_s_ = 0.001;
   std::array<double, 3> gain_per_s_{};
-  std::array<double, 3> vmax_mm_s_{};
+  std::array<double, 3> tau_s_{};  // drive velocity-loop lag (acceleration clamp)
   std::array<double, 3> min_mm_{}, max_mm_{};
+  LiveLimits limits_{};  // RT copy
 
   StateMachine sm_;
   control::ServoController ctrl_;
-  control::ServoParams active_params_{};
+  control::ServoParams base_params_{};  // start-up set: the structure live swaps must keep
   control::ContourErrorModel model_;
 
-  // Command mailbox and gains double buffer.
+  // Command mailbox and gains/limits double buffer: the producer writes staged_* only while the
+  // flag is clear; the loop reads them only while it is set, then clears it.
   SpscRing<LoopCommand> commands_;
-  std::mutex producer_mu_;  // non-RT producers only
-  control::ServoController staged_ctrl_;
+  mutable std::mutex producer_mu_;  // non-RT producers only
   control::ServoParams staged_params_{};
+  control::ServoParams applied_params_{};  // non-RT shadow of the set before staged_params_
   std::atomic<bool> staged_ready_{false};
   std::atomic<std::uint64_t> staged_generation_{0};
+  LiveLimits staged_limits_{};
+  LiveLimits applied_limits_{};
+  std::atomic<bool> staged_limits_ready_{false};
+  std::atomic<std::uint64_t> staged_limits_generation_{0};
+  std::uint64_t limits_generation_ = 0;
+
+  // Force channel.
+  bool force_configured_ = false;
+  control::ForceController force_;
+  drivers::modbus::ForceReading reading_{};
+  double force_N_ = 0.0;
+  std::array<double, 3> force_xyz_N_{};
+  double force_age_s_ = 0.0;
+  bool force_requested_ = false;
+  double force_ref_N_ = 0.0;
+  double planned_progress_mm_ = 0.0;
+  control::ForceOutput fout_{};
+  double force_override_ = 1.0;
+  bool force_fallback_ = false;
+  bool force_ok_prev_ = true;
+  std::uint64_t force_fallbacks_ = 0;
+  double spindle_rpm_cmd_ = 0.0;
+  bool estop_input_ = false;
+  std::uint64_t accel_clamps_ = 0;
 
   SpscRing<RtEvent> events_;
   SpscRing<TelemetrySample> telemetry_;

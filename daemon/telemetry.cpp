@@ -129,7 +129,8 @@ void TelemetryWriter::consume(const TelemetrySample& s) {
     csv_ << ',';
     if (std::isfinite(true_um)) csv_ << true_um;
     for (double v : s.cmd_mm_s) csv_ << ',' << v;
-    csv_ << ',' << s.override_applied << '\n';
+    csv_ << ',' << s.override_applied << ',' << s.force_N << ',' << s.force_override << ','
+         << s.spindle_rpm << '\n';
   }
   if (stream_ && stream_every_ > 0 && s.cycle % static_cast<std::uint64_t>(stream_every_) == 0) {
     stream_(s);
@@ -145,7 +146,8 @@ void TelemetryWriter::start_recording(const std::string& path) {
   if (!csv_) throw std::runtime_error(path + ": cannot open for writing");
   csv_.precision(10);
   csv_ << "cycle,t_s,state,job,line,progress_mm,rx_mm,ry_mm,rz_mm,px_mm,py_mm,pz_mm,"
-          "eps_x_um,eps_y_um,eps_z_um,true_contour_error_um,vx_mm_s,vy_mm_s,vz_mm_s,override\n";
+          "eps_x_um,eps_y_um,eps_z_um,true_contour_error_um,vx_mm_s,vy_mm_s,vz_mm_s,override,"
+          "force_n,force_override,spindle_rpm\n";
   csv_path_ = path;
 }
 
