@@ -230,9 +230,8 @@ bool CommandServer::read_client(Client& c) {
           std::lock_guard lk(mu_);
           ++stats_.errors;
         }
-        queue(c, {{"ok", false},
-                  {"error", "request line longer than " + std::to_string(opt_.max_line_bytes) +
-                                " bytes; discarded"}});
+        queue(c, error_reply("request line longer than " + std::to_string(opt_.max_line_bytes) +
+                             " bytes; discarded"));
       }
     }
   }
@@ -243,42 +242,18 @@ void CommandServer::handle_line(Client& c, const std::string& line) {
     std::lock_guard lk(mu_);
     ++stats_.requests;
   }
-  nlohmann::json reply;
-  nlohmann::json req = nlohmann::json::parse(line, nullptr, false);
-  auto fail = [&](const std::string& msg) {
+  // The handler runs without mu_ held (it may call subscribe()/publish(), which take it).
+  RequestOutcome r = handle_request_line(
+      line, [&](const nlohmann::json& req) { return handler_(req, c.info); });
+  if (r.error) {
     std::lock_guard lk(mu_);
     ++stats_.errors;
-    reply["ok"] = false;
-    reply["error"] = msg;
-  };
-  if (req.is_discarded()) {
-    fail("malformed JSON");
-  } else if (!req.is_object()) {
-    fail("request must be a JSON object");
-  } else {
-    if (req.contains("id")) reply["id"] = req["id"];
-    if (!req.contains("cmd") || !req["cmd"].is_string()) {
-      fail("missing string field 'cmd'");
-    } else {
-      try {
-        nlohmann::json result = handler_(req, c.info);
-        reply["ok"] = true;
-        reply["result"] = std::move(result);
-      } catch (const CommandError& e) {
-        fail(e.what());
-      } catch (const nlohmann::json::exception& e) {
-        fail(std::string("bad argument: ") + e.what());
-      } catch (const std::exception& e) {
-        fail(std::string("internal error: ") + e.what());
-      }
-    }
   }
-  queue(c, reply);
+  queue(c, r.reply);
 }
 
 void CommandServer::queue(Client& c, const nlohmann::json& j) {
-  std::string s = j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-  s.push_back('\n');
+  std::string s = to_line(j);
   std::lock_guard lk(mu_);
   c.out += s;
   flush_client(c);
@@ -318,8 +293,7 @@ void CommandServer::unsubscribe(std::uint64_t client, const std::string& topic) 
 }
 
 void CommandServer::publish(const std::string& topic, const nlohmann::json& event) {
-  std::string s = event.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-  s.push_back('\n');
+  const std::string s = to_line(event);
   bool any = false;
   {
     std::lock_guard lk(mu_);

@@ -1,5 +1,6 @@
 #pragma once
 // Command socket: Unix domain stream socket, one JSON object per line in each direction.
+// The line protocol itself (parse, checks, reply shape) is daemon/command_protocol.hpp.
 //
 // Request:  {"id": <any>, "cmd": "<name>", ...args}
 // Reply:    {"id": <echoed>, "ok": true, "result": {...}}  or  {"id": ..., "ok": false, "error": "..."}
@@ -24,6 +25,8 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+
+#include "daemon/command_protocol.hpp"
 
 namespace contour::daemon {
 
@@ -101,12 +104,6 @@ class CommandServer {
   std::map<std::uint64_t, Client> clients_;
   std::uint64_t next_id_ = 1;
   CommandServerStats stats_;
-};
-
-// Thrown by a handler for an error reply ({"ok": false, "error": what()}).
-class CommandError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
 };
 
 }  // namespace contour::daemon

@@ -2,6 +2,8 @@
 //   contourd --config FILE [--socket PATH]     run (systemd Type=notify)
 //   contourd --config FILE --check-config      validate, print every error, exit 78 on errors
 //   contourd --latency-test SECONDS            RT set-up and wake-up lateness without drives
+//   contourd --config FILE --probe modbus|can|gpio [--count N] [--scan]
+//                                              commissioning probe: JSON lines, no loop (probe.hpp)
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <optional>
@@ -10,6 +12,7 @@
 #include "config/config.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/latency_test.hpp"
+#include "daemon/probe.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"contourd: real-time CNC servo daemon"};
@@ -28,11 +31,32 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 99));
   app.add_option("--cpu", lat.rt.cpu, "CPU for --latency-test (-1: any)");
   app.add_option("--plot", lat.plot_png, "PNG histogram for --latency-test");
+  std::string probe_kind;
+  contour::daemon::ProbeOptions probe;
+  app.add_option("--probe", probe_kind,
+                 "talk to the configured devices without starting the loop and print JSON lines: "
+                 "modbus (dynamometer samples), can (nodes, NMT state, identity), gpio (lines)");
+  app.add_option("--count", probe.count,
+                 "--probe: samples (modbus, default 10 at the poll rate) or rounds (can, gpio: 1)")
+      ->check(CLI::Range(1, 1000000));
+  app.add_flag("--scan", probe.scan, "--probe can: also scan node-ids 1..127");
   CLI11_PARSE(app, argc, argv);
 
   if (latency_s > 0.0) {
     lat.seconds = latency_s;
     return contour::daemon::run_latency_test(lat);
+  }
+  if (!probe_kind.empty()) {
+    const auto k = contour::daemon::parse_probe_kind(probe_kind);
+    if (!k) {
+      std::fprintf(stderr, "contourd: --probe: unknown kind '%s' (expected modbus, can or gpio)\n",
+                   probe_kind.c_str());
+      return 2;
+    }
+    probe.kind = *k;
+  } else if (probe.count != 0 || probe.scan) {
+    std::fprintf(stderr, "contourd: --count and --scan go with --probe\n");
+    return 2;
   }
   if (config_path.empty()) {
     std::fprintf(stderr, "contourd: --config FILE is required\n");
@@ -52,6 +76,14 @@ int main(int argc, char** argv) {
   if (check_only) {
     std::printf("%s: configuration OK (%zu axes)\n", config_path.c_str(), cfg.machine.axes.size());
     return 0;
+  }
+  if (!probe_kind.empty()) {
+    try {
+      return contour::daemon::run_probe(cfg, probe, stdout);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "contourd: probe: %s\n", e.what());
+      return 1;
+    }
   }
   contour::daemon::DaemonOptions opt;
   opt.config_path = config_path;

@@ -7,7 +7,27 @@
 
 namespace contour::drivers::modbus {
 
+const char* error_kind_name(ErrorKind k) noexcept {
+  switch (k) {
+    case ErrorKind::kNone: return "none";
+    case ErrorKind::kTimeout: return "timeout";
+    case ErrorKind::kException: return "exception";
+    case ErrorKind::kConnection: return "connection";
+    case ErrorKind::kProtocol: return "protocol";
+    case ErrorKind::kConfig: return "config";
+  }
+  return "?";
+}
+
 std::vector<ProbeRecord> probe_dynamometer(const DynamometerSettings& s, int count) {
+  std::vector<ProbeRecord> out;
+  out.reserve(static_cast<std::size_t>(count > 0 ? count : 0));
+  probe_dynamometer(s, count, [&](const ProbeRecord& r) { out.push_back(r); });
+  return out;
+}
+
+void probe_dynamometer(const DynamometerSettings& s, int count,
+                       const std::function<void(const ProbeRecord&)>& on_record) {
   const RegisterBlock block = register_block(s.map);
   if (block.count == 0 || block.count > kMaxBlockRegisters)
     throw std::invalid_argument("probe: register map must cover 1.." +
@@ -16,8 +36,6 @@ std::vector<ProbeRecord> probe_dynamometer(const DynamometerSettings& s, int cou
   using Clock = std::chrono::steady_clock;
   const auto period = std::chrono::duration_cast<Clock::duration>(
       std::chrono::duration<double>(1.0 / (s.poll_rate_hz > 0 ? s.poll_rate_hz : 200.0)));
-  std::vector<ProbeRecord> out;
-  out.reserve(static_cast<std::size_t>(count));
   ModbusClient client(s.transport);
   std::array<std::uint16_t, kMaxBlockRegisters> regs{};
   const std::span<std::uint16_t> span(regs.data(), block.count);
@@ -41,11 +59,11 @@ std::vector<ProbeRecord> probe_dynamometer(const DynamometerSettings& s, int cou
       if (e.kind == ErrorKind::kTimeout || e.kind == ErrorKind::kProtocol) client.flush();
       if (e.kind == ErrorKind::kConnection) client.close();
     }
-    out.push_back(std::move(r));
+    on_record(r);
+    if (i + 1 == count) break;  // no wait after the last sample
     next += period;
     std::this_thread::sleep_until(next);
   }
-  return out;
 }
 
 }  // namespace contour::drivers::modbus

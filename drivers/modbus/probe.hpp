@@ -3,6 +3,7 @@
 // configured transport, reads the register block `count` times at the poll rate, and returns one
 // record per request (decoded sample, or the translated error). Synchronous, non-RT; never throws
 // for device errors (they are in the records), throws std::invalid_argument for bad settings.
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -20,5 +21,13 @@ struct ProbeRecord {
 };
 
 std::vector<ProbeRecord> probe_dynamometer(const DynamometerSettings& s, int count);
+
+// Streaming form: `on_record` is called as each reply (or error) arrives, before the wait for the
+// next period, so a caller can print it with a meaningful age.
+void probe_dynamometer(const DynamometerSettings& s, int count,
+                       const std::function<void(const ProbeRecord&)>& on_record);
+
+// "timeout", "exception", "connection", "protocol", "config" ("none" for kNone).
+[[nodiscard]] const char* error_kind_name(ErrorKind k) noexcept;
 
 }  // namespace contour::drivers::modbus

@@ -181,3 +181,97 @@ TEST(CommandServer, SecondServerOnLiveSocketRefuses) {
   }
   s1.stop();
 }
+
+// ---- the pure line protocol (daemon/command_protocol.hpp), without a socket
+
+namespace {
+using contour::daemon::handle_request_line;
+using contour::daemon::RequestOutcome;
+
+json echo_handler(const json& req) {
+  const std::string cmd = req.at("cmd").get<std::string>();
+  if (cmd == "echo") return json{{"value", req.at("value")}};
+  if (cmd == "num") return json{{"n", req.at("n").get<double>()}};
+  if (cmd == "refuse") throw CommandError("refused: " + req.value("why", std::string("no")));
+  throw std::runtime_error("unknown command '" + cmd + "'");
+}
+}  // namespace
+
+TEST(CommandProtocol, WellFormedRequestEchoesIdAndResult) {
+  const RequestOutcome r = handle_request_line(R"({"id":{"a":[1,"x"]},"cmd":"echo","value":7})",
+                                               echo_handler);
+  EXPECT_FALSE(r.error);
+  EXPECT_EQ(r.reply["ok"], true);
+  EXPECT_EQ(r.reply["id"], json({{"a", {1, "x"}}}));
+  EXPECT_EQ(r.reply["result"]["value"], 7);
+  EXPECT_FALSE(r.reply.contains("error"));
+}
+
+TEST(CommandProtocol, EachRejectionHasItsTextAndTheHandlerDoesNotRun) {
+  struct Case {
+    std::string line;
+    std::string error;
+    bool id_echoed;
+  };
+  const std::string deep = "{\"id\":" + std::string(65, '[') + std::string(65, ']') + "}";
+  const Case cases[] = {
+      {"{not json", "malformed JSON", false},
+      {"", "malformed JSON", false},
+      {"[1,2]", "request must be a JSON object", false},
+      {"\"status\"", "request must be a JSON object", false},
+      {R"({"id":1})", "missing string field 'cmd'", true},
+      {R"({"id":2,"cmd":["status"]})", "missing string field 'cmd'", true},
+      {deep, "request nested deeper than 64 levels", false},
+  };
+  for (const auto& c : cases) {
+    bool ran = false;
+    const RequestOutcome r = handle_request_line(c.line, [&](const json&) {
+      ran = true;
+      return json::object();
+    });
+    EXPECT_FALSE(ran) << c.line;
+    EXPECT_TRUE(r.error) << c.line;
+    EXPECT_EQ(r.reply["ok"], false) << c.line;
+    EXPECT_EQ(r.reply["error"], c.error) << c.line;
+    EXPECT_EQ(r.reply.contains("id"), c.id_echoed) << c.line;
+  }
+}
+
+TEST(CommandProtocol, HandlerExceptionsMapToErrorReplies) {
+  const RequestOutcome refused = handle_request_line(R"({"id":5,"cmd":"refuse","why":"busy"})",
+                                                     echo_handler);
+  EXPECT_TRUE(refused.error);
+  EXPECT_EQ(refused.reply["error"], "refused: busy");
+  EXPECT_EQ(refused.reply["id"], 5);
+  const RequestOutcome bad_type = handle_request_line(R"({"cmd":"num","n":"three"})", echo_handler);
+  EXPECT_TRUE(bad_type.error);
+  EXPECT_EQ(bad_type.reply["error"].get<std::string>().rfind("bad argument: ", 0), 0u)
+      << bad_type.reply.dump();
+  const RequestOutcome unknown = handle_request_line(R"({"cmd":"what"})", echo_handler);
+  EXPECT_EQ(unknown.reply["error"], "internal error: unknown command 'what'");
+}
+
+TEST(CommandProtocol, NestingLimitCountsOnlyBracketsOutsideStrings) {
+  using contour::daemon::json_nesting_depth;
+  EXPECT_EQ(json_nesting_depth(R"({"a":[1,{"b":[]}]})", 64), 4u);
+  EXPECT_EQ(json_nesting_depth(R"({"a":"[[[[\"[[[[","b":{}})", 64), 2u);
+  EXPECT_EQ(json_nesting_depth("]]]][", 64), 1u);  // stray closers do not go negative
+  // Exactly at the limit is accepted and echoed; one more level is refused.
+  const std::string at = std::string(63, '[') + std::string(63, ']');
+  const RequestOutcome ok = handle_request_line("{\"id\":" + at + ",\"cmd\":\"echo\",\"value\":1}",
+                                                echo_handler);
+  EXPECT_FALSE(ok.error) << ok.reply.dump();
+  // A full-size line of '[' (the server's max line) is refused without recursing through it.
+  const RequestOutcome deep = handle_request_line(std::string(64 * 1024, '['), echo_handler);
+  EXPECT_TRUE(deep.error);
+}
+
+TEST(CommandProtocol, ToLineIsOneLineEvenWithNewlinesAndBadUtf8InStrings) {
+  json j{{"ok", false}, {"error", "a\nb\r\n"}, {"id", std::string("\xff\xfe", 2)}};
+  const std::string s = contour::daemon::to_line(j);
+  ASSERT_FALSE(s.empty());
+  EXPECT_EQ(s.find('\n'), s.size() - 1) << s;
+  const json back = json::parse(s);
+  EXPECT_EQ(back["error"], "a\nb\r\n");
+  EXPECT_EQ(back["id"], "\xEF\xBF\xBD\xEF\xBF\xBD");  // U+FFFD twice
+}
