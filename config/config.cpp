@@ -51,6 +51,9 @@ Config parse_root(const YAML::Node& root, const std::string& name) {
     {
       Section sec = top.child("bus");
       cfg.bus = parse_bus(sec);
+      cfg.bus_lockstep = sec.boolean("lockstep", false);
+      if (cfg.bus_lockstep && cfg.bus.type != "socketcan")
+        sec.error("lockstep", "only meaningful with type: socketcan (simulated CANopen drives)");
     }
     {
       Section sec = top.child("dynamometer");

@@ -30,6 +30,14 @@ struct Config {
   ControlConfig control;
   ForceConfig force;
   BusConfig bus;
+  // `bus.lockstep: true` (socketcan only): the drives are simulated in lockstep with SYNC
+  // (contour-machine-sim). The master then waits for every TPDO (up to kLockstepTpdoWaitMs)
+  // instead of loop.tpdo_deadline_us, and counts heartbeat time in cycles, so that a cycle that
+  // wakes late (VM steal time) cannot change the results. Never set it for real drives.
+  // Parsed in config.cpp beside parse_bus() (bus_config.* has another owner; it belongs in
+  // BusConfig).
+  bool bus_lockstep = false;
+  static constexpr int kLockstepTpdoWaitMs = 200;
   DynamometerConfig dynamometer;
   SpindleConfig spindle;
   GpioConfig gpio;

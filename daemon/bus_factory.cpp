@@ -3,22 +3,21 @@
 #include <stdexcept>
 #include <vector>
 
+#include "daemon/canopen_bus.hpp"
 #include "daemon/sim_bus.hpp"
 
 namespace contour::daemon {
 
-std::unique_ptr<AxisBus> make_axis_bus(const config::Config& cfg, BusLog /*log*/) {
+std::unique_ptr<AxisBus> make_axis_bus(const config::Config& cfg, BusLog log) {
+  if (cfg.bus.type == "socketcan") {
+    // The bus logs its start-up (bus load) and, from an event thread of its own, every master
+    // event (EMCY text, drive fault, heartbeat loss, missed-TPDO streak) through `log`.
+    return std::make_unique<CanopenBus>(cfg, std::move(log));
+  }
   if (cfg.bus.type != "sim") {
-    throw std::runtime_error("bus.type '" + cfg.bus.type +
-                             "' is not wired into contourd yet (only 'sim'); see daemon/README.md");
+    throw std::runtime_error("bus.type '" + cfg.bus.type + "' is not supported (sim, socketcan)");
   }
-  std::vector<control::FeedDriveParams> drives;
-  for (const auto& a : cfg.machine.axes) {
-    control::FeedDriveParams p = a.drive;
-    p.period_s = cfg.machine.period_s;
-    drives.push_back(p);
-  }
-  return std::make_unique<SimBus>(drives);
+  return std::make_unique<SimBus>(sim_bus_drives(cfg));
 }
 
 }  // namespace contour::daemon

@@ -6,21 +6,13 @@
 
 namespace contour::daemon {
 
-namespace {
-std::vector<control::FeedDriveParams> sim_drives(const config::Config& cfg) {
-  std::vector<control::FeedDriveParams> d;
-  for (const auto& a : cfg.machine.axes) {
-    control::FeedDriveParams p = a.drive;
-    p.period_s = cfg.machine.period_s;
-    d.push_back(p);
-  }
-  return d;
-}
-}  // namespace
-
 OfflineResult run_offline(const config::Config& cfg, const ProgramSource& src,
                           std::uint64_t max_cycles, const std::string& csv_path) {
-  SimBus bus(sim_drives(cfg));
+  // With bus.type socketcan the offline run models the CANopen drive's integer units (velocity
+  // target in counts/s, position in counts), so it reproduces a HIL run against
+  // contour-machine-sim exactly (see SimBus, make_sim_bus).
+  const auto sim_bus = make_sim_bus(cfg);
+  SimBus& bus = *sim_bus;
   ServoLoop loop(cfg, bus);
   TelemetryWriter writer(loop.telemetry(), loop.period_s());
   ProgramPlanner planner(cfg);
@@ -58,6 +50,10 @@ OfflineResult run_offline(const config::Config& cfg, const ProgramSource& src,
   planner.abort_and_join();
   const auto st = loop.status();
   r.state = std::string(to_string(st.state));
+  r.cause = std::string(to_string(st.cause));
+  r.fault_axis = st.fault_axis;
+  r.fault_value = st.fault_value;
+  r.fault_limit = st.fault_limit;
   r.finished_ok = st.finished_job == id && st.finished_ok;
   r.cycles = n;
   r.stats = writer.stats(id);

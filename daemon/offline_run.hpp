@@ -14,6 +14,9 @@ namespace contour::daemon {
 
 struct OfflineResult {
   std::string state;            // final machine state
+  std::string cause;            // its cause ("following error", ...; "none" after a clean run)
+  int fault_axis = -1;          // axis of that fault when it names one
+  double fault_value = 0.0, fault_limit = 0.0;
   bool finished_ok = false;
   std::uint64_t cycles = 0;     // program cycles (RUNNING/HOLD)
   RunStats stats;

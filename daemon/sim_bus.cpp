@@ -1,12 +1,26 @@
 #include "daemon/sim_bus.hpp"
 
+#include <cmath>
 #include <stdexcept>
+
+#include "drivers/canopen/codec.hpp"
 
 namespace contour::daemon {
 
-SimBus::SimBus(const std::vector<control::FeedDriveParams>& drives) {
+SimBus::SimBus(const std::vector<control::FeedDriveParams>& drives,
+               const std::vector<double>& can_counts_per_mm, bool can_velocity_mapped)
+    : can_velocity_mapped_(can_velocity_mapped) {
   if (drives.empty() || drives.size() > kMaxAxes) {
     throw std::invalid_argument("SimBus: 1 to 3 axes");
+  }
+  if (!can_counts_per_mm.empty()) {
+    if (can_counts_per_mm.size() != drives.size()) {
+      throw std::invalid_argument("SimBus: one counts_per_mm per axis");
+    }
+    for (std::size_t i = 0; i < drives.size(); ++i) {
+      if (!(can_counts_per_mm[i] > 0.0)) throw std::invalid_argument("SimBus: counts_per_mm > 0");
+      can_cpm_[i] = can_counts_per_mm[i];
+    }
   }
   axes_ = static_cast<int>(drives.size());
   for (std::size_t i = 0; i < drives.size(); ++i) {
@@ -36,18 +50,39 @@ void SimBus::read(BusFeedback& fb) noexcept {
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
     AxisFeedback& f = fb.axis[a];
-    f.position_mm = drive_[a].measured_mm();
-    f.velocity_mm_s = drive_[a].velocity_mm_s();
+    if (can_cpm_[a] > 0.0) {
+      // What CanopenBus makes of the drive's TPDO (see the constructor's comment).
+      const double cpm = can_cpm_[a];
+      const std::int64_t counts = std::llround(drive_[a].position_mm() * cpm);
+      f.position_mm = static_cast<double>(counts) / cpm;
+      if (can_velocity_mapped_) {
+        f.velocity_mm_s = static_cast<double>(std::llround(drive_[a].velocity_mm_s() * cpm)) / cpm;
+      } else {
+        f.velocity_mm_s = can_have_last_ ? drivers::canopen::counts_velocity_mm_s(
+                                               counts - can_last_counts_[a], cpm,
+                                               drive_[a].params().period_s * 1.0)
+                                         : 0.0;
+        can_last_counts_[a] = counts;
+      }
+    } else {
+      f.position_mm = drive_[a].measured_mm();
+      f.velocity_mm_s = drive_[a].velocity_mm_s();
+    }
     f.fresh = true;
     f.fault = fault_[a];
     f.enabled = mode_ == DriveMode::kEnabled && !f.fault;
     f.statusword = f.fault ? 0x0008 : (f.enabled ? 0x0027 : 0x0040);
   }
+  if (can_cpm_[0] > 0.0) can_have_last_ = true;
 }
 
 void SimBus::write(const AxisCommands& cmd) noexcept {
   for (int i = 0; i < axes_; ++i) {
-    received_v_[static_cast<std::size_t>(i)] = cmd.velocity_mm_s[static_cast<std::size_t>(i)];
+    const auto a = static_cast<std::size_t>(i);
+    received_v_[a] = can_cpm_[a] > 0.0 ? static_cast<double>(drivers::canopen::mm_s_to_counts_s(
+                                             cmd.velocity_mm_s[a], can_cpm_[a])) /
+                                             can_cpm_[a]
+                                       : cmd.velocity_mm_s[a];
   }
   received_mode_ = cmd.mode;
 }
@@ -61,7 +96,34 @@ bool SimBus::set_position(int axis, double position_mm) {
 }
 
 std::string SimBus::describe() const {
-  return "simulated machine, " + std::to_string(axes_) + " axes (in-process, lockstep)";
+  return "simulated machine, " + std::to_string(axes_) + " axes (in-process, lockstep" +
+         (can_cpm_[0] > 0.0 ? ", CANopen count quantisation)" : ")");
+}
+
+std::vector<control::FeedDriveParams> sim_bus_drives(const config::Config& cfg) {
+  std::vector<control::FeedDriveParams> drives;
+  for (const auto& a : cfg.machine.axes) {
+    control::FeedDriveParams p = a.drive;
+    p.period_s = cfg.machine.period_s;
+    drives.push_back(p);
+  }
+  return drives;
+}
+
+std::unique_ptr<SimBus> make_sim_bus(const config::Config& cfg) {
+  std::vector<double> cpm;
+  bool velocity_mapped = false;
+  if (cfg.bus.type == "socketcan") {
+    for (const auto& a : cfg.machine.axes) cpm.push_back(a.counts_per_mm);
+    // The axes' TPDO mapping (bus.drives / bus.nodes): 0x606C mapped on the first axis decides
+    // for all (a mixed mapping is not modelled).
+    const auto nodes = config::resolve_bus_nodes(cfg.bus, cfg.machine);
+    if (!nodes.empty()) {
+      for (const auto& e : nodes.front().tpdo)
+        velocity_mapped = velocity_mapped || e.index == 0x606C;
+    }
+  }
+  return std::make_unique<SimBus>(sim_bus_drives(cfg), cpm, velocity_mapped);
 }
 
 }  // namespace contour::daemon

@@ -6,8 +6,10 @@
 // transport delay (machine.axes[].sim.delay_cycles counts the total delay, as in contour-sim).
 #include <array>
 #include <atomic>
+#include <memory>
 #include <vector>
 
+#include "config/config.hpp"
 #include "control/feed_drive.hpp"
 #include "daemon/axis_bus.hpp"
 
@@ -15,7 +17,20 @@ namespace contour::daemon {
 
 class SimBus final : public AxisBus {
  public:
-  explicit SimBus(const std::vector<control::FeedDriveParams>& drives);
+  // can_counts_per_mm empty: the ideal in-process bus (position quantised to the plant's BLU,
+  // velocity commands as doubles). Non-empty (one per axis): model what a CANopen drive sees
+  // and reports, as contour-machine-sim does over vcan, so that an offline run of a
+  // `bus.type: socketcan` config gives the HIL figures exactly:
+  //   - the velocity target is the RPDO's integer 0x60FF: round(v * counts_per_mm) counts/s
+  //     (codec.hpp mm_s_to_counts_s), applied as counts / counts_per_mm;
+  //   - the position is the TPDO's 0x6064: llround(x * counts_per_mm) counts / counts_per_mm
+  //     (replaces the BLU quantisation, the drive's encoder unit being the count);
+  //   - the velocity is what CanopenBus reports: 0x606C (llround(v * counts_per_mm) counts/s)
+  //     when `can_velocity_mapped`, else the difference of the last two count positions over
+  //     one period (codec.hpp counts_velocity_mm_s), 0 at the first reading.
+  explicit SimBus(const std::vector<control::FeedDriveParams>& drives,
+                  const std::vector<double>& can_counts_per_mm = {},
+                  bool can_velocity_mapped = false);
 
   void start() override {}
   void stop() noexcept override {}
@@ -37,6 +52,15 @@ class SimBus final : public AxisBus {
   DriveMode received_mode_ = DriveMode::kDisabled;
   std::array<std::atomic<bool>, kMaxAxes> fault_{};
   std::uint64_t cycle_ = 0;
+  std::array<double, kMaxAxes> can_cpm_{};  // 0 = ideal bus
+  bool can_velocity_mapped_ = false;
+  std::array<std::int64_t, kMaxAxes> can_last_counts_{};
+  bool can_have_last_ = false;
 };
+
+// The drives of machine.axes with the loop period (delay_cycles as configured).
+std::vector<control::FeedDriveParams> sim_bus_drives(const config::Config& cfg);
+// SimBus for `cfg`: with bus.type socketcan it models the CANopen quantisation (see SimBus).
+std::unique_ptr<SimBus> make_sim_bus(const config::Config& cfg);
 
 }  // namespace contour::daemon

@@ -256,6 +256,13 @@ class PositionUnwrapper {
 inline double counts_to_mm(std::int64_t counts, double counts_per_mm) noexcept {
   return static_cast<double>(counts) / counts_per_mm;
 }
+// Velocity estimated from two position readings `dt_s` apart (counts -> mm/s). Used where the
+// TPDO carries no 0x606C; the daemon's CANopen bus and its offline model (SimBus) share this one
+// expression so their results are bit-identical.
+inline double counts_velocity_mm_s(std::int64_t delta_counts, double counts_per_mm,
+                                   double dt_s) noexcept {
+  return static_cast<double>(delta_counts) / counts_per_mm / dt_s;
+}
 // Rounds to the nearest count and wraps into int32 as a drive's 32-bit register does.
 std::int32_t mm_to_counts_wrapped(double mm, double counts_per_mm) noexcept;
 // Velocity command in counts/s, saturated to int32.

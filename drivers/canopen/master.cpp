@@ -412,9 +412,10 @@ CycleStatus Master::begin_cycle(std::int64_t now_ns) noexcept {
   sync_mono_ns_ = mono_ns();
   const SendResult s = bus_.send(sync_frame());
   if (s == SendResult::kDropped) ++counters_.tx_dropped;
-  if (cfg_.master_heartbeat_ms > 0 &&
+  if (cfg_.master_heartbeat_ms > 0 && heartbeat_on_ &&
       (last_master_hb_ns_ < 0 ||
-       now_ns - last_master_hb_ns_ >= static_cast<std::int64_t>(cfg_.master_heartbeat_ms) * 1000000LL)) {
+       now_ns - last_master_hb_ns_ >=
+           static_cast<std::int64_t>(cfg_.master_heartbeat_ms) * 1000000LL)) {
     last_master_hb_ns_ = now_ns;
     if (bus_.send(heartbeat_frame(cfg_.master_node_id, NmtState::kOperational)) ==
         SendResult::kDropped)

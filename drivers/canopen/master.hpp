@@ -152,6 +152,9 @@ class Master {
   void set_request_all(DriveRequest r) noexcept;
   void quick_stop_all() noexcept { set_request_all(DriveRequest::kQuickStop); }
   void set_target(std::size_t i, std::int32_t v) noexcept { rt_[i].target = v; }
+  // Test hook (HIL): stop/resume the master's own heartbeat (the drives consume it, 0x1016), to
+  // prove the drives' reaction to a dead master without killing the process. RT-safe.
+  void set_heartbeat_producer(bool on) noexcept { heartbeat_on_ = on; }
   // Lets the sequencers send the fault-reset edge and clears the latched master-side faults.
   void reset_faults() noexcept;
 
@@ -199,6 +202,7 @@ class Master {
   std::int64_t sync_mono_ns_ = 0;
   bool fault_reset_ = false;
   bool cycling_ = false;
+  bool heartbeat_on_ = true;
 };
 
 // Kernel receive filters for the master's socket: EMCY, TPDO1, SDO responses and heartbeats of

@@ -55,14 +55,17 @@ std::vector<long> parse_tuple(const std::string& s, std::size_t min_n, std::size
 int main(int argc, char** argv) {
   CLI::App app{"contour-machine-sim: simulated CiA 402 machine on SocketCAN (lockstep with SYNC)"};
   std::string config_path, iface, modbus;
-  std::vector<std::string> drop, fault, stop_hb, sdo_abort, malformed;
+  std::vector<std::string> drop, fault, fault_motion, stop_hb, sdo_abort, malformed, drop_sdo;
   app.add_option("--config", config_path, "contourd YAML config (machine, bus)")->required();
   app.add_option("--can", iface, "CAN interface, e.g. vcan0")->required();
   app.add_option("--modbus", modbus, "HOST:PORT of the dynamometer Modbus TCP server");
   app.add_option("--drop-tpdo", drop, "NODE:FROM_SYNC[:COUNT] drop TPDOs (COUNT 0 = forever)");
   app.add_option("--fault", fault, "NODE:SYNC[:CODE] raise a drive fault (EMCY + statusword)");
+  app.add_option("--fault-after-motion", fault_motion,
+                 "NODE:SYNCS[:CODE] raise a drive fault SYNCS after the node starts moving");
   app.add_option("--stop-heartbeat", stop_hb, "NODE:SYNC stop the node's heartbeats");
   app.add_option("--sdo-abort", sdo_abort, "NODE:INDEX:SUB[:CODE] answer this object with an abort");
+  app.add_option("--drop-sdo", drop_sdo, "NODE:COUNT ignore the node's first COUNT SDO requests");
   app.add_option("--malformed", malformed, "NODE:SYNC send malformed frames at this SYNC");
   CLI11_PARSE(app, argc, argv);
 
@@ -151,6 +154,12 @@ int main(int argc, char** argv) {
       s.faults.fault_at = v[1];
       if (v.size() > 2) s.faults.fault_code = static_cast<std::uint16_t>(v[2]);
     }
+    for (const auto& d : fault_motion) {
+      auto v = parse_tuple(d, 2, 3, "--fault-after-motion");
+      auto& s = find(v[0]);
+      s.faults.fault_after_motion = v[1];
+      if (v.size() > 2) s.faults.fault_code = static_cast<std::uint16_t>(v[2]);
+    }
     for (const auto& d : stop_hb) {
       auto v = parse_tuple(d, 2, 2, "--stop-heartbeat");
       find(v[0]).faults.stop_heartbeat_at = v[1];
@@ -160,6 +169,10 @@ int main(int argc, char** argv) {
       auto& s = find(v[0]);
       s.faults.sdo_abort_object = (static_cast<std::uint32_t>(v[1]) << 8) | static_cast<std::uint32_t>(v[2]);
       if (v.size() > 3) s.faults.sdo_abort_code = static_cast<std::uint32_t>(v[3]);
+    }
+    for (const auto& d : drop_sdo) {
+      auto v = parse_tuple(d, 2, 2, "--drop-sdo");
+      find(v[0]).faults.drop_sdo_requests = v[1];
     }
     for (const auto& d : malformed) {
       auto v = parse_tuple(d, 2, 2, "--malformed");
@@ -173,7 +186,9 @@ int main(int argc, char** argv) {
   try {
     // Only what the drives consume: a flood of unrelated frames is dropped by the kernel and
     // cannot push a SYNC out of the socket queue (lockstep would break).
-    std::vector<contour::drivers::CanFilter> filters{{0x000, 0x7FF}, {0x080, 0x7FF}};
+    // Heartbeats 0x701..0x77F: the master's is consumed (0x1016), the others are ignored.
+    std::vector<contour::drivers::CanFilter> filters{
+        {0x000, 0x7FF}, {0x080, 0x7FF}, {0x700, 0x780}};
     for (const auto& s : setups) {
       filters.push_back({0x200u + s.node_id, 0x7FF});
       filters.push_back({0x600u + s.node_id, 0x7FF});

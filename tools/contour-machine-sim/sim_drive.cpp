@@ -75,6 +75,9 @@ void SimDrive::build_od() {
   rw(0x6040, 0, 0, 2);
   ro(0x6041, 0, co::statusword_for(state_), 2);
   rw(0x605A, 0, 2, 2);
+  rw(0x6007, 0, 1, 2);  // abort connection option code: 1 = fault
+  ro(0x1029, 0, 1, 1);
+  rw(0x1029, 1, 0, 1);  // error behaviour, communication error: 0 = pre-operational
   rw(0x6060, 0, 0, 1);
   ro(0x6061, 0, 0, 1);
   ro(0x6064, 0, 0, 4);
@@ -124,6 +127,7 @@ void SimDrive::reset_communication() {
   for (auto& [k, e] : od_)
     if ((k >> 8) >= 0x1000 && (k >> 8) < 0x2000) e = od_defaults_.at(k);
   nmt_ = co::NmtState::kPreOperational;
+  master_hb_armed_ = false;
   syncs_ = 0;
   rx_latched_ = false;
   seg_upload_ = seg_download_ = false;
@@ -135,8 +139,60 @@ void SimDrive::heartbeat() {
   send_(co::heartbeat_frame(s_.node_id, nmt_));
 }
 
+void SimDrive::on_master_heartbeat(const CanFrame& f) {
+  const std::uint32_t c = u32(0x1016, 1);
+  const auto node = static_cast<std::uint8_t>((c >> 16) & 0x7F);
+  if ((c & 0xFFFF) == 0 || node == 0 || f.id != co::kCobHeartbeat + node || f.dlc != 1) return;
+  master_hb_armed_ = true;
+  master_hb_sync_ = syncs_;
+  master_hb_wall_ns_ = now_wall_ns_;
+}
+
+void SimDrive::master_heartbeat_lost() {
+  master_hb_armed_ = false;  // one event per loss; re-armed by the next heartbeat
+  co::Emcy e;
+  e.code = 0x8130;
+  e.error_register = 0x11;  // generic + communication
+  send_(co::emcy_frame(s_.node_id, e));
+  switch (read_int(0x6007, 0)) {
+    case 1:
+      if (state_ != co::Cia402State::kFault && state_ != co::Cia402State::kFaultReactionActive &&
+          state_ != co::Cia402State::kSwitchOnDisabled &&
+          state_ != co::Cia402State::kNotReadyToSwitchOn) {
+        state_ = co::Cia402State::kFaultReactionActive;
+        set_int(0x603F, 0, 0x8130);
+        set_int(0x1001, 0, 0x11);
+      }
+      break;
+    case 2:
+      if (state_ != co::Cia402State::kFault && state_ != co::Cia402State::kFaultReactionActive)
+        state_ = co::Cia402State::kSwitchOnDisabled;
+      break;
+    case 3:
+      if (state_ == co::Cia402State::kOperationEnabled) state_ = co::Cia402State::kQuickStopActive;
+      break;
+    default:
+      break;
+  }
+  const auto behaviour = read_int(0x1029, 1);
+  if (behaviour == 0 && nmt_ == co::NmtState::kOperational) nmt_ = co::NmtState::kPreOperational;
+  if (behaviour == 2) nmt_ = co::NmtState::kStopped;
+  if (nmt_ != co::NmtState::kOperational) heartbeat();  // the state change is visible at once
+}
+
 void SimDrive::tick_wall(std::int64_t now_ns) {
   now_wall_ns_ = now_ns;
+  if (master_hb_armed_) {
+    // SYNC stopped too (the master process is gone or frozen): the consumer falls back to the
+    // wall clock, but only after max(5 x consumer time, 2 s) of silence. While SYNC flows the
+    // consumer is lockstep (on_sync); a master merely descheduled for a few hundred ms on a
+    // loaded VM (seen: > 300 ms while compiling) must not trip it, or lockstep results would
+    // depend on scheduling.
+    const std::int64_t t_ns = static_cast<std::int64_t>(u32(0x1016, 1) & 0xFFFF) * 1000000LL;
+    const std::int64_t quiet_ns = std::max<std::int64_t>(5 * t_ns, 2000000000LL);
+    if (now_ns - last_sync_wall_ns_ > quiet_ns && now_ns - master_hb_wall_ns_ > quiet_ns)
+      master_heartbeat_lost();
+  }
   const auto hb_ms = read_int(0x1017, 0);
   if (hb_ms <= 0) return;
   // In operational with SYNC flowing the heartbeat is lockstep (on_sync); otherwise wall-clock.
@@ -162,9 +218,14 @@ void SimDrive::on_frame(const CanFrame& f) {
     }
     return;
   }
+  if (f.id > co::kCobHeartbeat && f.id <= co::kCobHeartbeat + 127) {
+    on_master_heartbeat(f);
+    return;
+  }
   if (nmt_ == co::NmtState::kStopped) return;
   if (f.id == co::kCobSync) {
-    if (nmt_ == co::NmtState::kOperational) on_sync();
+    // Pre-operational after a communication error: the plant keeps stepping, no PDOs.
+    if (nmt_ == co::NmtState::kOperational || syncs_ > 0) on_sync();
     return;
   }
   if (f.id == co::kCobSdoRx + s_.node_id) {
@@ -218,6 +279,13 @@ void SimDrive::on_sync() {
   ++syncs_;
   last_sync_wall_ns_ = now_wall_ns_;
   const auto& fl = s_.faults;
+  if (master_hb_armed_) {
+    const long t_ms = static_cast<long>(u32(0x1016, 1) & 0xFFFF);
+    const long limit =
+        std::max<long>(1, std::lround(static_cast<double>(t_ms) * 1e-3 / s_.period_s));
+    if (syncs_ - master_hb_sync_ > limit) master_heartbeat_lost();
+  }
+  const bool operational = nmt_ == co::NmtState::kOperational;
   // 1. sample and transmit (values of the state reached at the previous SYNC)
   const std::int64_t pos_counts =
       s_.spindle ? std::llround(spindle_rev_ * s_.counts_per_mm)
@@ -232,7 +300,8 @@ void SimDrive::on_sync() {
   const bool tx_valid = (u32(0x1800, 1) & 0x80000000u) == 0;
   const bool dropping = fl.drop_tpdo_from >= 0 && syncs_ >= fl.drop_tpdo_from &&
                         (fl.drop_tpdo_count == 0 || syncs_ < fl.drop_tpdo_from + fl.drop_tpdo_count);
-  if (tx_valid && tx_type >= 1 && tx_type <= 240 && syncs_ % tx_type == 0 && !dropping) {
+  if (operational && tx_valid && tx_type >= 1 && tx_type <= 240 && syncs_ % tx_type == 0 &&
+      !dropping) {
     const auto m = mapping(false);
     co::PdoValues v{};
     for (std::size_t k = 0; k < m.count; ++k) v[k] = read_int(m.entries[k].index, m.entries[k].sub);
@@ -261,12 +330,18 @@ void SimDrive::on_sync() {
   }
   // 2. lockstep heartbeat
   const auto hb_ms = read_int(0x1017, 0);
-  if (hb_ms > 0) {
+  if (hb_ms > 0 && operational) {
     const long every = std::max<long>(1, std::lround(static_cast<double>(hb_ms) * 1e-3 / s_.period_s));
     if (syncs_ % every == 0) heartbeat();
   }
   // 3. apply the RPDO latched since the previous SYNC
   if (fl.fault_at >= 0 && syncs_ == fl.fault_at && state_ != co::Cia402State::kFault) raise_fault(fl.fault_code);
+  if (motion_started_at_ < 0 && state_ == co::Cia402State::kOperationEnabled && rx_latched_ &&
+      rx_target_ != 0)
+    motion_started_at_ = syncs_;
+  if (fl.fault_after_motion >= 0 && motion_started_at_ >= 0 &&
+      syncs_ == motion_started_at_ + fl.fault_after_motion && state_ != co::Cia402State::kFault)
+    raise_fault(fl.fault_code);
   const std::uint16_t cw = rx_latched_ ? rx_cw_ : cw_;
   prev_cw_ = cw_;
   cw_ = cw;
@@ -416,6 +491,12 @@ void SimDrive::on_sdo(const CanFrame& f) {
   const std::uint8_t sub = f.data[3];
   if (cs == 0x80) {  // abort from the client
     seg_upload_ = seg_download_ = false;
+    return;
+  }
+  // Fault injection: a lost request (or response) - the client's timeout and retry must cope.
+  // Only initiate requests (upload ccs 2, download ccs 1) are dropped, never segments.
+  if ((ccs == 1 || ccs == 2) && sdo_dropped_ < s_.faults.drop_sdo_requests) {
+    ++sdo_dropped_;
     return;
   }
   // Segment traffic first (no multiplexer in these frames).

@@ -4,6 +4,12 @@
 // machine with quick stop and fault reset, and the plant: control::FeedDrive (the ONE plant
 // model) for an axis, a first-order speed lag for the spindle.
 //
+// Heartbeat consumer: when the master's heartbeat (0x1016:1) stops for its consumer time the
+// drive sends EMCY 0x8130 (life guard / heartbeat error), reacts per 0x6007 abort connection
+// option code (default 1: fault; 2: disable voltage; 3: quick stop; 0: none) and per 0x1029:1
+// error behaviour (default 0: operational -> pre-operational, PDOs stop; 1: no change;
+// 2: stopped). The plant keeps stepping on SYNC in pre-operational (physics does not pause).
+//
 // Lockstep: the plant advances exactly one period per SYNC received. At SYNC n the drive first
 // samples and sends its TPDO (statusword, position of step n), then applies the RPDO latched
 // since SYNC n-1 and steps the plant. The CAN transport therefore contributes one period of
@@ -27,10 +33,15 @@ struct SimFaults {
   long drop_tpdo_count = 0;   // 0 = forever
   long fault_at = -1;         // raise a drive fault (EMCY + statusword) at this SYNC count
   std::uint16_t fault_code = 0x2310;
+  // Raise the fault this many SYNCs after the first SYNC at which the drive, in operation
+  // enabled, applies a non-zero target (motion start): "mid-run" independently of how long the
+  // master idled before the program started.
+  long fault_after_motion = -1;
   long stop_heartbeat_at = -1;
   std::optional<std::uint32_t> sdo_abort_object;  // index << 8 | sub
   std::uint32_t sdo_abort_code = 0x06090030;
   long malformed_at = -1;  // send a burst of malformed frames at this SYNC count
+  long drop_sdo_requests = 0;  // ignore this many SDO requests (initiate frames) from power-on
 };
 
 struct SimDriveSetup {
@@ -90,6 +101,8 @@ class SimDrive {
   void abort(std::uint16_t index, std::uint8_t sub, std::uint32_t code);
   void raise_fault(std::uint16_t code);
   void heartbeat();
+  void on_master_heartbeat(const drivers::CanFrame& f);
+  void master_heartbeat_lost();
 
   SimDriveSetup s_;
   Send send_;
@@ -105,9 +118,18 @@ class SimDrive {
   bool rx_latched_ = false;
   std::uint16_t rx_cw_ = 0;
   long syncs_ = 0;
+  long motion_started_at_ = -1;  // SYNC count of the first non-zero target applied
+  long sdo_dropped_ = 0;         // SDO requests ignored so far (SimFaults::drop_sdo_requests)
   std::int64_t last_hb_ns_ = 0;
   std::int64_t last_sync_wall_ns_ = 0;
   std::int64_t now_wall_ns_ = 0;
+  // Heartbeat consumer (0x1016:1, the master's heartbeat). CiA 301: monitoring starts with the
+  // first heartbeat received. Lockstep while SYNC flows (timeout counted in SYNC periods, so the
+  // reaction does not depend on wall-clock scheduling); wall-clock when SYNC has stopped too for
+  // max(5 x consumer time, 2 s) (the master process is gone).
+  bool master_hb_armed_ = false;
+  long master_hb_sync_ = 0;  // syncs_ at the last master heartbeat
+  std::int64_t master_hb_wall_ns_ = 0;
   // Segmented transfers (one at a time per node, as CiA 301 allows).
   std::vector<std::uint8_t> seg_buf_;
   std::size_t seg_pos_ = 0;

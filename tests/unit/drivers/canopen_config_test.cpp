@@ -59,3 +59,31 @@ TEST(BusConfig, CspSwitchesTheDefaultRpdoToTargetPosition) {
   ASSERT_TRUE(m.nodes[1].vendor_id.has_value());
   EXPECT_EQ(*m.nodes[1].vendor_id, 0x1234u);
 }
+
+TEST(BusConfig, LockstepIsForSimulatedCanopenDrivesOnly) {
+  EXPECT_TRUE(cfg::load_config_file(CONTOUR_SOURCE_DIR "/config/hil.yaml").bus_lockstep);
+  EXPECT_FALSE(cfg::load_config_string("machine:\n  axes:\n    - {name: X, node_id: 1}\n"
+                                       "bus:\n  type: socketcan\n  interface: vcan0\n")
+                   .bus_lockstep);
+  try {
+    cfg::load_config_string(
+        "machine:\n  axes:\n    - {name: X}\nbus:\n  type: sim\n  lockstep: true\n", "l.yaml");
+    FAIL() << "lockstep accepted with type sim";
+  } catch (const cfg::ConfigError& e) {
+    std::string all;
+    for (const auto& m : e.errors()) all += m + "\n";
+    EXPECT_NE(all.find("l.yaml:6"), std::string::npos) << all;
+    EXPECT_NE(all.find("bus.lockstep"), std::string::npos) << all;
+  }
+  try {
+    cfg::load_config_string(
+        "machine:\n  axes:\n    - {name: X, node_id: 1}\nbus:\n  type: socketcan\n"
+        "  interface: vcan0\n  lockstep: maybe\n",
+        "m.yaml");
+    FAIL() << "lockstep: maybe accepted";
+  } catch (const cfg::ConfigError& e) {
+    std::string all;
+    for (const auto& m : e.errors()) all += m + "\n";
+    EXPECT_NE(all.find("bus.lockstep"), std::string::npos) << all;
+  }
+}

@@ -1,0 +1,301 @@
+#include "daemon/canopen_bus.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <stdexcept>
+
+#include "drivers/can/socket_can.hpp"
+#include "drivers/canopen/master_from_config.hpp"
+
+namespace contour::daemon {
+
+namespace co = drivers::canopen;
+
+namespace {
+std::int64_t mono_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+co::DriveRequest to_request(DriveMode m) noexcept {
+  switch (m) {
+    case DriveMode::kEnabled:
+      return co::DriveRequest::kEnabled;
+    case DriveMode::kQuickStop:
+      return co::DriveRequest::kQuickStop;
+    case DriveMode::kDisabled:
+      break;
+  }
+  return co::DriveRequest::kDisabled;
+}
+}  // namespace
+
+CanopenBus::CanopenBus(const config::Config& cfg, Log log) : log_(std::move(log)) { init(cfg); }
+
+CanopenBus::CanopenBus(const config::Config& cfg, drivers::CanBus& can, Log log)
+    : log_(std::move(log)), can_(&can) {
+  init(cfg);
+}
+
+CanopenBus::~CanopenBus() {
+  if (started_) stop();
+}
+
+void CanopenBus::init(const config::Config& cfg) {
+  const auto& axes = cfg.machine.axes;
+  if (axes.empty() || axes.size() > static_cast<std::size_t>(kMaxAxes)) {
+    throw std::runtime_error(cfg.source + ": machine.axes: the CANopen bus drives 1 to " +
+                             std::to_string(kMaxAxes) + " axes");
+  }
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    if (axes[i].node_id == 0) {
+      throw std::runtime_error(cfg.source + ": machine.axes[" + std::to_string(i) + "] (" +
+                               axes[i].name + ").node_id: required with bus.type socketcan");
+    }
+    if (!(axes[i].counts_per_mm > 0.0)) {
+      throw std::runtime_error(cfg.source + ": machine.axes[" + std::to_string(i) + "] (" +
+                               axes[i].name + ").counts_per_mm: must be > 0");
+    }
+    counts_per_mm_[i] = axes[i].counts_per_mm;
+  }
+  axes_ = static_cast<int>(axes.size());
+  mcfg_ = co::master_config_from(cfg);  // axes first, in machine order, then the spindle
+  for (std::size_t i = 0; i < mcfg_.nodes.size(); ++i) {
+    if (mcfg_.nodes[i].name == "spindle") spindle_index_ = static_cast<int>(i);
+  }
+  for (int i = 0; i < axes_; ++i) {
+    velocity_mapped_[static_cast<std::size_t>(i)] =
+        mcfg_.nodes[static_cast<std::size_t>(i)].tpdo.find(0x606C) >= 0;
+  }
+  for (int i = 0; i < axes_; ++i) {
+    csp_[static_cast<std::size_t>(i)] =
+        mcfg_.nodes[static_cast<std::size_t>(i)].mode == co::DriveMode::kCsp;
+  }
+  period_s_ = cfg.machine.period_s;
+  lockstep_ = cfg.bus_lockstep;
+  if (lockstep_) {
+    // Simulated drives answer every SYNC; a TPDO that is "late" only means this process or the
+    // simulator was descheduled (VM steal time). Waiting keeps the run identical to contour-sim.
+    mcfg_.tpdo_deadline_us = config::Config::kLockstepTpdoWaitMs * 1000;
+  }
+  ifname_ = cfg.bus.interface;
+  period_ns_ = static_cast<std::int64_t>(cfg.loop.period_us) * 1000;
+}
+
+void CanopenBus::start() {
+  if (started_) return;
+  if (can_ == nullptr) {
+    try {
+      owned_can_ = std::make_unique<drivers::SocketCan>(ifname_, co::master_rx_filters(mcfg_));
+    } catch (const drivers::SocketCanError& e) {
+      throw std::runtime_error(std::string("bus.interface ") + e.what());
+    }
+    can_ = owned_can_.get();
+  }
+  master_ = std::make_unique<co::Master>(*can_, mcfg_, log_);
+  if (log_) {
+    const auto& l = master_->bus_load();
+    log_("CANopen: " + describe() + "; bus load " +
+         std::to_string(std::lround(l.worst_case * 100.0)) + " % worst case (" +
+         std::to_string(std::lround(l.nominal * 100.0)) + " % nominal)");
+  }
+  master_->start_up();  // throws StartupError (a std::runtime_error) naming node and object
+  master_->set_request_all(co::DriveRequest::kDisabled);
+  cycle_ = 0;
+  last_mode_ = DriveMode::kDisabled;
+  started_ = true;
+  if (event_thread_wanted_ && log_) {
+    stop_events_ = false;
+    event_thread_ = std::thread([this] {
+      while (!stop_events_.load(std::memory_order_acquire)) {
+        drain_events(log_);
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      }
+    });
+  }
+}
+
+void CanopenBus::run_cycles_for_stop() noexcept {
+  // Up to 1 s of cycles at the loop period: enough for a quick-stop ramp (0x6085) and the
+  // disable controlwords; ends as soon as no drive is powered.
+  int silent = 0;
+  for (int k = 0; k < 1000; ++k) {
+    begin_cycle();
+    BusFeedback fb;
+    read(fb);
+    bool any_fresh = false;
+    for (std::size_t i = 0; i < master_->size(); ++i)
+      any_fresh = any_fresh || master_->node(i).tpdo_fresh;
+    // Nobody answers (drives gone, or pre-operational after a communication error): each cycle
+    // would cost the whole TPDO wait; the controlwords below are sent a few times, then give up.
+    silent = any_fresh ? 0 : silent + 1;
+    bool powered = false;
+    for (std::size_t i = 0; i < master_->size(); ++i) {
+      const auto s = master_->node(i).state;
+      powered = powered || s == co::Cia402State::kOperationEnabled ||
+                s == co::Cia402State::kQuickStopActive || s == co::Cia402State::kSwitchedOn ||
+                s == co::Cia402State::kFaultReactionActive;
+    }
+    bool enabled = false;
+    for (std::size_t i = 0; i < master_->size(); ++i)
+      enabled = enabled || master_->node(i).state == co::Cia402State::kOperationEnabled;
+    // Quick stop while a drive still runs, then disable voltage.
+    master_->set_request_all(enabled ? co::DriveRequest::kQuickStop : co::DriveRequest::kDisabled);
+    for (std::size_t i = 0; i < master_->size(); ++i) master_->set_target(i, 0);
+    master_->send_rpdos();
+    if ((!powered && k > 2) || silent > 3) break;
+    if (!lockstep_) {
+      timespec ts{0, static_cast<long>(period_ns_)};
+      nanosleep(&ts, nullptr);
+    }
+  }
+}
+
+void CanopenBus::stop() noexcept {
+  if (!started_) return;
+  started_ = false;
+  run_cycles_for_stop();
+  // NMT pre-operational: the nodes stop their PDOs but stay configured and answer SDOs.
+  for (std::size_t i = 0; i < master_->size(); ++i) {
+    can_->send(co::nmt_frame(co::NmtCommand::kPreOperational, master_->setup(i).node_id));
+  }
+  stop_events_.store(true, std::memory_order_release);
+  if (event_thread_.joinable()) event_thread_.join();
+  if (log_) {
+    try {
+      drain_events(log_);
+      log_("CANopen: drives disabled, nodes pre-operational");
+    } catch (...) {  // logging must not throw out of stop()
+    }
+  }
+}
+
+void CanopenBus::begin_cycle() noexcept {
+  const std::int64_t now = lockstep_ ? static_cast<std::int64_t>(cycle_) * period_ns_ : mono_ns();
+  ++cycle_;
+  sync_ns_ = now;
+  begin_fault_ = master_->begin_cycle(now) == co::CycleStatus::kFault;
+}
+
+void CanopenBus::read(BusFeedback& fb) noexcept {
+  master_->collect();
+  fb.axes = axes_;
+  fb.heartbeat_lost = false;
+  fb.heartbeat_lost_node = 0;
+  for (std::size_t i = 0; i < master_->size(); ++i) {
+    const co::NodeRuntime& r = master_->node(i);
+    if ((r.faults & static_cast<std::uint8_t>(co::NodeFault::kHeartbeatLost)) != 0 &&
+        !fb.heartbeat_lost) {
+      fb.heartbeat_lost = true;
+      fb.heartbeat_lost_node = master_->setup(i).node_id;
+    }
+    if (static_cast<int>(i) >= axes_) continue;
+    AxisFeedback& f = fb.axis[i];
+    const double cpm = counts_per_mm_[i];
+    f.fresh = r.tpdo_fresh;
+    if (r.tpdo_fresh) {
+      f.position_mm = co::counts_to_mm(r.position_counts, cpm);
+      if (velocity_mapped_[i]) {
+        f.velocity_mm_s = static_cast<double>(r.velocity_counts_s) / cpm;
+      } else {
+        // Lockstep: readings n cycles apart are n periods apart in drive time (the same
+        // expression as SimBus, bit for bit). Real drives sample at SYNC on the wall clock, and
+        // a late or skipped cycle stretches the gap: use the SYNC times then.
+        const double dt_s = lockstep_
+                                ? period_s_ * static_cast<double>(cycle_ - last_fresh_cycle_[i])
+                                : static_cast<double>(sync_ns_ - last_fresh_ns_[i]) * 1e-9;
+        f.velocity_mm_s =
+            have_last_[i] && dt_s > 0.0
+                ? co::counts_velocity_mm_s(r.position_counts - last_counts_[i], cpm, dt_s)
+                : 0.0;
+        last_counts_[i] = r.position_counts;
+        last_fresh_cycle_[i] = cycle_;
+        last_fresh_ns_[i] = sync_ns_;
+        have_last_[i] = true;
+      }
+    }
+    f.statusword = r.statusword;
+    f.enabled = r.state == co::Cia402State::kOperationEnabled;
+    // The drive's own fault state, or a master-side latch that means the drive can no longer be
+    // trusted (it rebooted behind our back).
+    f.fault = r.state == co::Cia402State::kFault ||
+              r.state == co::Cia402State::kFaultReactionActive ||
+              (r.faults & (static_cast<std::uint8_t>(co::NodeFault::kDriveFault) |
+                           static_cast<std::uint8_t>(co::NodeFault::kUnexpectedBootUp))) != 0;
+  }
+  const auto bs = can_->bus_state();
+  // A SYNC that could not be sent at all (not a counted ENOBUFS drop), bus-off or error-passive.
+  fb.bus_error =
+      begin_fault_ || bs == drivers::BusState::kBusOff || bs == drivers::BusState::kErrorPassive;
+  fb.emcy_count = static_cast<std::uint32_t>(master_->counters().emcy_frames);
+  co::MasterEvent e;
+  while (master_->pop_event(e)) events_.push(e);  // full ring: counted drop, never blocks
+}
+
+void CanopenBus::write(const AxisCommands& cmd) noexcept {
+  const co::DriveRequest req = to_request(cmd.mode);
+  if (cmd.mode == DriveMode::kEnabled && last_mode_ != DriveMode::kEnabled) {
+    master_->reset_faults();  // fault-reset edge for drives in Fault; clears master latches
+  }
+  last_mode_ = cmd.mode;
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    master_->set_request(a, req);
+    if (csp_[a]) {
+      const co::NodeRuntime& r = master_->node(a);
+      if (r.state != co::Cia402State::kOperationEnabled || req != co::DriveRequest::kEnabled) {
+        csp_target_counts_[a] = static_cast<double>(r.position_counts);
+      } else if (std::isfinite(cmd.velocity_mm_s[a])) {
+        csp_target_counts_[a] += cmd.velocity_mm_s[a] * counts_per_mm_[a] * period_s_;
+      }
+      // The drive's 32-bit register wraps: send the low 32 bits of the rounded target.
+      const auto t = static_cast<std::int64_t>(std::llround(csp_target_counts_[a]));
+      master_->set_target(a, static_cast<std::int32_t>(static_cast<std::uint32_t>(t & 0xFFFFFFFF)));
+    } else {
+      master_->set_target(a, co::mm_s_to_counts_s(cmd.velocity_mm_s[a], counts_per_mm_[a]));
+    }
+  }
+  if (spindle_index_ >= 0) {
+    const auto s = static_cast<std::size_t>(spindle_index_);
+    const double rpm = std::isfinite(cmd.spindle_rpm) ? cmd.spindle_rpm : 0.0;
+    master_->set_request(s, cmd.mode == DriveMode::kQuickStop ? co::DriveRequest::kQuickStop
+                            : cmd.mode == DriveMode::kEnabled ? co::DriveRequest::kEnabled
+                                                              : co::DriveRequest::kDisabled);
+    master_->set_target(s, co::mm_s_to_counts_s(rpm, 1.0));  // rounds and saturates
+  }
+  master_->send_rpdos();
+}
+
+bool CanopenBus::set_position(int /*axis*/, double /*position_mm*/) { return false; }
+
+std::string CanopenBus::describe() const {
+  std::string s = "CANopen over SocketCAN " + ifname_ + ", axes on nodes";
+  for (std::size_t i = 0; i < mcfg_.nodes.size(); ++i) {
+    const auto& n = mcfg_.nodes[i];
+    if (static_cast<int>(i) == spindle_index_) continue;
+    s += " " + std::to_string(n.node_id) + "(" + n.name + ")";
+  }
+  if (spindle_index_ >= 0) {
+    s += ", spindle node " +
+         std::to_string(mcfg_.nodes[static_cast<std::size_t>(spindle_index_)].node_id);
+  }
+  if (lockstep_) s += ", lockstep (simulated drives)";
+  return s;
+}
+
+std::size_t CanopenBus::drain_events(const Log& sink) {
+  std::lock_guard<std::mutex> g(drain_mutex_);
+  std::size_t n = 0;
+  co::MasterEvent e;
+  while (events_.pop(e)) {
+    ++n;
+    if (sink && master_) sink("CANopen: " + master_->describe(e));
+  }
+  if (const auto d = events_.dropped(); d != 0 && n != 0 && sink) {
+    sink("CANopen: " + std::to_string(d) + " bus events dropped so far (event ring full)");
+  }
+  return n;
+}
+
+}  // namespace contour::daemon
