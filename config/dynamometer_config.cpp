@@ -119,7 +119,6 @@ DynamometerConfig parse_dynamometer(Section& s) {
     if (f.moving_average && window > 100000)
       fs.error("min_spindle_rpm", "tooth period at this speed exceeds 100000 samples");
   }
-  cfg.fallback = s.choice("fallback", "hold_feed", {"hold_feed", "programmed_feed"});
   return cfg;
 }
 

@@ -22,7 +22,7 @@
 //   reconnect_max_ms: 2000
 //   filter: {enabled: true, moving_average: true, teeth: 4, min_spindle_rpm: 100,
 //            butterworth_order: 2, cutoff_hz: 10}      # runs on the poll thread
-//   fallback: hold_feed       # hold_feed | programmed_feed (force control off): for the force loop
+// (what the force loop does on a stale sample is `force.fallback`)
 #include <string>
 
 #include "config/yaml_reader.hpp"
@@ -34,7 +34,6 @@ namespace contour::config {
 struct DynamometerConfig {
   bool enabled = false;
   drivers::modbus::DynamometerSettings reader{};  // incl. filter (sample_rate_hz = poll_rate_hz)
-  std::string fallback = "hold_feed";
 };
 
 DynamometerConfig parse_dynamometer(Section& s);

@@ -75,9 +75,11 @@ ForceConfig parse_force(Section& s) {
     }
     sp.finish();
   }
-  l.fallback = s.choice("fallback", "hold", {"hold", "programmed_feed"}) == "programmed_feed"
-                   ? control::ForceFallback::kProgrammedFeed
-                   : control::ForceFallback::kHold;
+  const std::string fallback = s.choice("fallback", "hold", {"hold", "programmed_feed", "fault"});
+  l.fallback = fallback == "programmed_feed" ? control::ForceFallback::kProgrammedFeed
+                                             : control::ForceFallback::kHold;
+  // `fault`: the controller holds the feed (as `hold`) and the loop faults in the same cycle.
+  f.stale_faults = fallback == "fault";
   l.stale_age_s = s.number("stale_ms", l.stale_age_s * 1e3, 0.1, 1e5) / 1e3;
   l.bumpless_tau_s = s.number("bumpless_ms", l.bumpless_tau_s * 1e3, 0.1, 1e5) / 1e3;
   return f;

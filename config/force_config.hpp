@@ -23,7 +23,8 @@
 //     force_ceiling_N: 3.0
 //   spindle:
 //     nominal_rpm: 3000, rpm_per_unit: 1000, min_rpm: 500, max_rpm: 6000, rate_rpm_s: 6000
-//   fallback: hold               # hold (feed hold) | programmed_feed (force control off)
+//   fallback: hold               # hold (feed hold) | programmed_feed (force control off) |
+//                                # fault (FAULT "stale force sample": controlled stop)
 //   stale_ms: 20                 # a force sample older than this is stale
 //   bumpless_ms: 100
 #include "config/yaml_reader.hpp"
@@ -37,6 +38,7 @@ struct ForceConfig {
   double reference_N = 1.0;
   control::ForceDesignParams design{};  // period_s is taken from machine.period_ms by the user
   control::ForceLimits limits{};
+  bool stale_faults = false;  // fallback: fault
 };
 
 ForceConfig parse_force(Section& s);

@@ -55,6 +55,11 @@ class AxisBus {
   virtual void read(BusFeedback& fb) noexcept = 0;
   virtual void write(const AxisCommands& cmd) noexcept = 0;
 
+  // RT, from `reset`: acknowledge faults the bus side latches (CANopen: the CiA 402 fault-reset
+  // edge to drives in Fault, the master's latched heartbeat/missed-TPDO/bus faults). A cause that
+  // persists shows again in the following cycles' feedback. Default: nothing latched.
+  virtual void acknowledge_faults() noexcept {}
+
   // Sim/absolute encoders: set the current position (home/set-position). Non-RT, only while the
   // loop is not running motion. Returns false when the bus cannot do it.
   virtual bool set_position(int axis, double position_mm) = 0;

@@ -80,6 +80,10 @@ class CanopenBus final : public AxisBus {
 
   // Positions come from the drives' encoders: not settable over this bus (returns false).
   bool set_position(int axis, double position_mm) override;
+  // Operator reset: fault-reset edge to drives in Fault, master latches cleared (RT-safe).
+  void acknowledge_faults() noexcept override {
+    if (master_) master_->reset_faults();
+  }
   [[nodiscard]] std::string describe() const override;
 
   // Non-RT: describes and passes every pending master event to `sink`; returns how many.

@@ -2,6 +2,7 @@
 // command that is illegal in the current state gets an error reply naming the state.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -115,6 +116,35 @@ json Daemon::status_json() {
            {"lateness_p99_us", h.quantile_us(0.99)},
            {"realtime", rt_report_.realtime},
            {"memory_locked", rt_report_.memory_locked}}}};
+  {
+    // Non-empty bins only (1 us wide up to 20 ms): what `contourctl plot --kind timing` draws.
+    json lows = json::array(), counts = json::array();
+    for (int i = 0; i < LatencyHistogram::kBins; ++i) {
+      if (h.bin_count(i) == 0) continue;
+      lows.push_back(LatencyHistogram::bin_low_us(i));
+      counts.push_back(h.bin_count(i));
+    }
+    j["timing"]["lateness_p999_us"] = h.quantile_us(0.999);
+    j["timing"]["lateness_histogram"] = {{"bin_low_us", lows}, {"count", counts}};
+  }
+  if (const std::uint64_t job = st.attached_job != 0 ? st.attached_job : loaded_job_; job != 0) {
+    // The program being run (or last loaded): size, progress and its contour-error figures so far.
+    std::lock_guard lk(jobs_mu_);
+    auto it = jobs_.find(job);
+    if (it != jobs_.end()) {
+      const RunStats rs = writer_->stats(job);
+      const double len = it->second.length_mm;
+      j["program"] = {{"job", job},
+                      {"name", it->second.name},
+                      {"motion_blocks", it->second.motion_blocks},
+                      {"length_mm", len},
+                      {"progress_pct", len > 0.0 && st.attached_job == job
+                                           ? std::min(100.0, 100.0 * st.progress_mm / len)
+                                           : 0.0},
+                      {"max_contour_error_um", rs.max_contour_error_um},
+                      {"rms_contour_error_um", rs.rms_contour_error_um()}};
+    }
+  }
   if (st.fault_axis >= 0 || st.cause != FaultCause::kNone) {
     j["fault"] = {{"cause", to_string(st.cause)}, {"axis", st.fault_axis},
                   {"value", st.fault_value}, {"limit", st.fault_limit}};
@@ -329,7 +359,7 @@ json Daemon::cmd_load(const json& req) {
   if (job->planner_failed.load()) throw CommandError("load: " + planner_->error());
   {
     std::lock_guard lk(jobs_mu_);
-    jobs_[id] = JobRecord{job, src.name, {}, 0};
+    jobs_[id] = JobRecord{job, src.name, {}, 0, static_cast<std::size_t>(sum.motion_blocks), sum.length_mm};
   }
   if (!loop_->post({CommandKind::kAttachJob, 0, 0.0, 0.0, job.get()})) {
     throw CommandError("command queue full; retry");

@@ -54,15 +54,44 @@ void Daemon::on_event(const RtEvent& e, const std::string& text) {
   if (server_) server_->publish("events", {{"event", "log"}, {"text", text}});
 }
 
+// Bus messages come from the bus's own non-RT event thread (CANopen: EMCY, heartbeat loss,
+// missed-TPDO faults, NMT changes, start-up/stop). Fault-like ones also go into the fault lists of
+// `status` and of the running job, next to the loop's own fault (which names the cause).
+void Daemon::on_bus_message(const std::string& text) {
+  const bool faultish = text.find("EMCY") != std::string::npos ||
+                        text.find("fault") != std::string::npos ||
+                        text.find("heartbeat lost") != std::string::npos ||
+                        text.find("missed") != std::string::npos;
+  if (!faultish) {
+    spdlog::info("{}", text);
+    return;
+  }
+  spdlog::warn("{}", text);
+  // loop_ and server_ are assigned on the main thread after the bus starts: use them only once
+  // start_components has published them.
+  const bool ready = components_ready_.load(std::memory_order_acquire);
+  const std::uint64_t job = ready ? loop_->status().attached_job : 0;
+  {
+    std::lock_guard lk(jobs_mu_);
+    recent_faults_.push_back(text);
+    if (recent_faults_.size() > 32) recent_faults_.erase(recent_faults_.begin());
+    auto it = jobs_.find(job);
+    if (it != jobs_.end()) it->second.faults.push_back(text);
+  }
+  if (ready) server_->publish("events", {{"event", "log"}, {"text", text}});
+}
+
 void Daemon::start_components() {
-  bus_ = make_axis_bus(cfg_, [](const std::string& m) { spdlog::info("{}", m); });
+  bus_ = make_axis_bus(cfg_, [this](const std::string& m) { on_bus_message(m); });
   bus_->start();
   io_ = std::make_unique<IoChannels>(cfg_, [](const std::string& m) { spdlog::info("{}", m); });
   if (!io_->has_estop_input() && cfg_.bus.type != "sim") {
     spdlog::warn("no gpio E-stop input configured: the software does not see the machine's "
                  "E-stop chain (the hardware chain still acts on the drives)");
   }
-  loop_ = std::make_unique<ServoLoop>(cfg_, *bus_, 4096, io_.get());
+  LoopOptions lopt;
+  lopt.force_stale_faults = cfg_.force.stale_faults;  // force.fallback: fault
+  loop_ = std::make_unique<ServoLoop>(cfg_, *bus_, 4096, io_.get(), lopt);
   io_->start([this] {
     const auto st = loop_->status();
     return IoOutputs{st.out_drive_enable, st.out_spindle_enable, st.out_mist, st.out_flood, st.cycle};
@@ -108,10 +137,12 @@ void Daemon::start_components() {
   server_ = std::make_unique<CommandServer>(
       so, [this](const nlohmann::json& r, const ClientInfo& c) { return handle(r, c); });
   server_->start();
+  components_ready_.store(true, std::memory_order_release);
   spdlog::info("command socket {}", so.path);
 }
 
 void Daemon::stop_components() {
+  components_ready_.store(false, std::memory_order_release);
   if (server_) server_->stop();
   if (planner_) planner_->abort_and_join();
   if (rt_.joinable()) {

@@ -65,12 +65,15 @@ class Daemon {
     std::string name;
     std::vector<std::string> faults;
     std::uint64_t overruns_at_start = 0;
+    std::size_t motion_blocks = 0;
+    double length_mm = 0.0;
   };
   void start_components();
   void stop_components();
   void controlled_shutdown();
   void reload_config();
   void on_event(const RtEvent& e, const std::string& text);
+  void on_bus_message(const std::string& text);
   void free_released_jobs();
   nlohmann::json status_json();
   nlohmann::json result_json(std::uint64_t job);
@@ -98,6 +101,7 @@ class Daemon {
   RtSetupReport rt_report_;
   std::atomic<bool> rt_stop_{false};
   std::atomic<bool> shutdown_{false};
+  std::atomic<bool> components_ready_{false};  // loop_/server_ published (bus event thread reads)
 
   std::mutex jobs_mu_;  // command thread vs logger thread
   std::map<std::uint64_t, JobRecord> jobs_;

@@ -87,7 +87,8 @@ std::string describe(const RtEvent& e) {
       break;
     case EventKind::kFault:
       o << "FAULT " << to_string(e.cause);
-      if (e.axis >= 0) o << " axis " << e.axis;
+      // For a heartbeat loss the field carries the CANopen node-id, not an axis index.
+      if (e.axis >= 0) o << (e.cause == FaultCause::kHeartbeatLost ? " node " : " axis ") << e.axis;
       if (e.cause == FaultCause::kFollowingError || e.cause == FaultCause::kContourError) {
         o << ": " << e.value << " mm > limit " << e.limit << " mm";
       } else if (e.cause == FaultCause::kSoftLimit) {

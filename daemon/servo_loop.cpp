@@ -359,19 +359,17 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       break;
     case CommandKind::kReset: {
       // The E-stop input latch is cleared by the non-RT side (IoChannels::reset_estop) first.
-      bool gone = !fb_.heartbeat_lost && !fb_.bus_error && !(io_ != nullptr && io_->estop_tripped());
-      for (int i = 0; i < axes_; ++i) gone = gone && !fb_.axis[static_cast<std::size_t>(i)].fault;
-      const Transition t = sm_.reset(gone);
-      if (!t.accepted) {
+      if (st != MachineState::kFault && st != MachineState::kEstop) {
         refuse();
         break;
       }
-      transition(t, FaultCause::kNone);
-      force_fallback_ = false;
-      fault_axis_ = -1;
-      fault_value_ = fault_limit_ = 0.0;
-      missed_streak_.fill(0);
-      transition(sm_.apply(Request::kEnable), FaultCause::kNone);
+      if (!try_reset()) {
+        // Drives in Fault leave it only on the CiA 402 fault-reset edge, and the master's latched
+        // heartbeat/bus faults only when acknowledged: ask the bus, then give the causes up to
+        // kResetWindowCycles to clear (the reset completes in the cycle they do, else refused).
+        bus_.acknowledge_faults();
+        reset_pending_cycles_ = kResetWindowCycles;
+      }
       break;
     }
     case CommandKind::kJog: {
@@ -423,6 +421,20 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
   }
 }
 
+bool ServoLoop::try_reset() noexcept {
+  bool gone = !fb_.heartbeat_lost && !fb_.bus_error && !(io_ != nullptr && io_->estop_tripped());
+  for (int i = 0; i < axes_; ++i) gone = gone && !fb_.axis[static_cast<std::size_t>(i)].fault;
+  const Transition t = sm_.reset(gone);
+  if (!t.accepted) return false;
+  transition(t, FaultCause::kNone);
+  force_fallback_ = false;
+  fault_axis_ = -1;
+  fault_value_ = fault_limit_ = 0.0;
+  missed_streak_.fill(0);
+  transition(sm_.apply(Request::kEnable), FaultCause::kNone);
+  return true;
+}
+
 void ServoLoop::cycle() noexcept {
   // 1. Cycle boundary: the staged gains (state kept: ServoController::set_gains) and limits.
   if (staged_ready_.load(std::memory_order_acquire)) {
@@ -454,6 +466,22 @@ void ServoLoop::cycle() noexcept {
   }
 
   // Commands after the TPDOs, so that `reset` judges the drives' current fault bits.
+  if (reset_pending_cycles_ > 0) {
+    --reset_pending_cycles_;
+    const MachineState st = sm_.state();
+    if (st != MachineState::kFault && st != MachineState::kEstop) {
+      reset_pending_cycles_ = 0;
+    } else if (try_reset()) {
+      reset_pending_cycles_ = 0;
+    } else if (reset_pending_cycles_ == 0) {
+      RtEvent e;
+      e.cycle = cycle_;
+      e.kind = EventKind::kCommandRefused;
+      e.from = e.to = st;
+      e.command = CommandKind::kReset;
+      events_.push(e);
+    }
+  }
   LoopCommand c;
   for (int n = 0; n < kMaxCommandsPerCycle && commands_.pop(c); ++n) apply_command(c);
 

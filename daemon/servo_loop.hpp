@@ -220,7 +220,7 @@ void validate(const LiveLimits& l, int axes);
 
 struct LoopOptions {
   // A stale/invalid force sample while force control is on faults the machine ("stale force
-  // sample") instead of the configured fallback. No config key yet (see daemon/README.md).
+  // sample") instead of only the fallback: config `force.fallback: fault`.
   bool force_stale_faults = false;
 };
 
@@ -267,6 +267,7 @@ class ServoLoop {
   void emit(EventKind k, FaultCause c = FaultCause::kNone, int axis = -1, double value = 0.0,
             double limit = 0.0) noexcept;
   void detach_job(bool ok) noexcept;
+  bool try_reset() noexcept;  // FAULT/ESTOP -> enable when every cause is gone
   void hold_here() noexcept;  // reference := current measured position, controller state reset
   void publish() noexcept;
   void force_step(MachineState st) noexcept;
@@ -327,6 +328,8 @@ class ServoLoop {
 
   // Cycle state.
   std::uint64_t cycle_ = 0;
+  static constexpr int kResetWindowCycles = 250;  // a pending `reset` waits this long for causes
+  int reset_pending_cycles_ = 0;
   BusFeedback fb_{};
   AxisCommands out_{};
   Eigen::Vector3d ref_ = Eigen::Vector3d::Zero();

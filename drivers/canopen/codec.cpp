@@ -442,8 +442,10 @@ std::uint16_t Cia402Sequencer::next(Cia402State actual, DriveRequest req,
   switch (actual) {
     case Cia402State::kFault:
     case Cia402State::kFaultReactionActive:
-      // Rising edge of bit 7: alternate 0x0000 / 0x0080 while the fault stays latched.
-      if (req != DriveRequest::kDisabled && fault_reset_allowed && actual == Cia402State::kFault)
+      // Rising edge of bit 7: alternate 0x0000 / 0x0080 while the fault stays latched. Sent for
+      // any request once the supervisor allows it (operator reset): CiA 402 fault reset leads to
+      // Switch on disabled, which is also where a disabled request wants the drive.
+      if (fault_reset_allowed && actual == Cia402State::kFault)
         cw = (last_ & kCwFaultReset) != 0 ? kCwDisableVoltage : kCwFaultReset;
       else
         cw = kCwDisableVoltage;

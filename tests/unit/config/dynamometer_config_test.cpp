@@ -52,7 +52,6 @@ TEST(DynamometerConfig, FullTcpExample) {
   timeout_ms: 15
   stale_ms: 30
   filter: {moving_average: false, butterworth_order: 4, cutoff_hz: 20}
-  fallback: programmed_feed
 )";
   std::vector<std::string> err;
   const auto c = parse<cc::DynamometerConfig>(y, "dynamometer", cc::parse_dynamometer, err);
@@ -77,7 +76,6 @@ TEST(DynamometerConfig, FullTcpExample) {
   EXPECT_EQ(c.reader.filter.butterworth_order, 4);
   EXPECT_FALSE(c.reader.filter.moving_average);
   EXPECT_DOUBLE_EQ(c.reader.filter.sample_rate_hz, 500.0);
-  EXPECT_EQ(c.fallback, "programmed_feed");
 }
 
 TEST(DynamometerConfig, RtuDefaultsAndAbsent) {
@@ -200,7 +198,6 @@ TEST(DynamometerConfig, ProposedHilSnippetParses) {
   timeout_ms: 20
   stale_ms: 50
   filter: {teeth: 4, min_spindle_rpm: 100, butterworth_order: 2, cutoff_hz: 10}
-  fallback: hold_feed
 gpio:
   backend: sim
   estop: {name: ESTOP, debounce_ms: 5}

@@ -162,6 +162,10 @@ TEST(Cia402, SequencerEnablesQuickStopsAndResetsFaultsWithAnEdge) {
   // a held bit 7 is not an edge
   EXPECT_EQ(co::drive_transition(s, 0x0080, 0x0080, 2, false), co::Cia402State::kFault);
   EXPECT_EQ(seq.next(s, co::DriveRequest::kEnabled, true), 0x0000);  // drops for the next edge
+  // An operator reset with the drives still requested disabled (FAULT state) sends the edge too.
+  co::Cia402Sequencer seq2;
+  EXPECT_EQ(seq2.next(s, co::DriveRequest::kDisabled, false), 0x0000);
+  EXPECT_EQ(seq2.next(s, co::DriveRequest::kDisabled, true), 0x0080);
 }
 
 TEST(Pdo, PackUnpackLittleEndianRoundTripRandomised) {
