@@ -70,7 +70,16 @@ void Daemon::on_bus_message(const std::string& text) {
   // loop_ and server_ are assigned on the main thread after the bus starts: use them only once
   // start_components has published them.
   const bool ready = components_ready_.load(std::memory_order_acquire);
-  const std::uint64_t job = ready ? loop_->status().attached_job : 0;
+  // The job the message belongs to: the running one, or the one that ended (e.g. by this very
+  // fault) less than a second of cycles ago: the bus's event thread reports within ~20 ms.
+  std::uint64_t job = 0;
+  if (ready) {
+    const auto st = loop_->status();
+    const auto recent = static_cast<std::uint64_t>(1.0 / loop_->period_s());
+    job = st.attached_job != 0                                        ? st.attached_job
+          : st.finished_job != 0 && st.cycle < st.finished_cycle + recent ? st.finished_job
+                                                                          : 0;
+  }
   {
     std::lock_guard lk(jobs_mu_);
     recent_faults_.push_back(text);

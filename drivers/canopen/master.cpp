@@ -506,9 +506,16 @@ CycleStatus Master::send_rpdos() noexcept {
     if (s == SendResult::kError) err = true;
   }
   if (fault_reset_) {
+    // Operator reset in progress: a drive that has left Fault clears its drive-fault latch (it may
+    // have been latched again by the TPDOs that still showed Fault before the reset edge acted).
     bool any = false;
-    for (const auto& r : rt_)
-      if (r.state == Cia402State::kFault || r.state == Cia402State::kFaultReactionActive) any = true;
+    for (auto& r : rt_) {
+      if (r.state == Cia402State::kFault || r.state == Cia402State::kFaultReactionActive) {
+        any = true;
+      } else {
+        r.faults &= static_cast<std::uint8_t>(~static_cast<std::uint8_t>(NodeFault::kDriveFault));
+      }
+    }
     if (!any) fault_reset_ = false;
   }
   return err ? CycleStatus::kFault : CycleStatus::kOk;

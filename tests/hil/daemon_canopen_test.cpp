@@ -281,6 +281,15 @@ TEST(DaemonCanopen, DriveFaultMidRunStopsEveryAxisAndLogsTheEmcy) {
   }
   EXPECT_NE(log.find("EMCY node 2 (Y): 0x2310 continuous over-current"), std::string::npos) << log;
   EXPECT_NE(log.find("node 2 (Y): drive fault"), std::string::npos) << log;
+  // The EMCY text is also in the job's fault list (the bus's event thread files it).
+  const std::string faults = d.ok({{"cmd", "result"}, {"job", job}})["faults"].dump();
+  EXPECT_NE(faults.find("0x2310"), std::string::npos) << faults;
+  // Operator reset: the loop acknowledges the bus faults, the master sends the CiA 402
+  // fault-reset edge, the (one-shot) drive fault clears and the drives are enabled again.
+  d.ok({{"cmd", "reset"}});
+  st = d.wait_status([](const json& s) { return s["state"] == "READY"; });
+  EXPECT_EQ(st["state"], "READY") << st.dump() << "\n" << d.log();
+  EXPECT_TRUE(st["drives_enabled"].get<bool>()) << st.dump();
   EXPECT_EQ(d.terminate_and_wait(SIGTERM), 0) << d.log();
   const std::string summary = sim.stop();
   EXPECT_EQ(summary.find("operation enabled"), std::string::npos) << summary;
