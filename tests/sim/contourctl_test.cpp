@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "config/config.hpp"
+#include "tests/support/daemon_process.hpp"
 
 extern char** environ;
 
@@ -37,12 +38,7 @@ const std::string kDaemon = std::string(CONTOUR_BINARY_DIR) + "/daemon/contourd"
 const std::string kCtl = std::string(CONTOUR_BINARY_DIR) + "/tools/contourctl";
 const std::string kSrc = CONTOUR_SOURCE_DIR;
 
-std::string slurp(const std::string& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using contour::test::slurp;
 
 std::vector<std::string> lines_of(const std::string& s) {
   std::vector<std::string> out;
@@ -87,17 +83,7 @@ Proc run_proc(const std::vector<std::string>& args, const fs::path& dir) {
   return p;
 }
 
-int connect_to(const std::string& path) {
-  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
-  sockaddr_un a{};
-  a.sun_family = AF_UNIX;
-  std::strncpy(a.sun_path, path.c_str(), sizeof(a.sun_path) - 1);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
+int connect_to(const std::string& path) { return contour::test::connect_unix(path); }
 
 bool is_png(const std::string& path, std::uintmax_t min_bytes, std::string* why) {
   std::error_code ec;

@@ -28,6 +28,7 @@
 // DynamometerServer lives in contour-machine-sim, which is not a library (as in
 // tests/unit/drivers/modbus_dynamometer_test.cpp).
 #include "tools/contour-machine-sim/dynamometer_server.cpp"
+#include "tests/support/daemon_process.hpp"
 
 extern char** environ;
 
@@ -37,104 +38,47 @@ using nlohmann::json;
 namespace fs = std::filesystem;
 namespace dm = contour::drivers::modbus;
 
-const std::string kBin = std::string(CONTOUR_BINARY_DIR) + "/daemon/contourd";
 const std::string kSrc = CONTOUR_SOURCE_DIR;
 
-std::string slurp(const std::string& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+using contour::test::slurp;
+
+// config/sim.yaml plus `extra_yaml`, written to a temporary file (the SIGHUP test rewrites it).
+std::string io_config_path(const std::string& tag) {
+  return (fs::temp_directory_path() /
+          ("contourd_io_" + tag + "_" + std::to_string(::getpid()) + ".yaml"))
+      .string();
+}
+std::string write_io_config(const std::string& tag, const std::string& extra_yaml) {
+  const std::string p = io_config_path(tag);
+  std::ofstream(p) << slurp(kSrc + "/config/sim.yaml") << "\n" << extra_yaml;
+  return p;
 }
 
-class Daemon {
+// contourd as a child process with a JSON-lines client (tests/support).
+class Daemon : public contour::test::DaemonProcess {
  public:
-  Daemon(const std::string& tag, const std::string& extra_yaml) {
-    dir_ = fs::temp_directory_path() / ("contourd_io_" + tag + "_" + std::to_string(::getpid()));
-    fs::create_directories(dir_);
-    sock_ = (dir_ / "c.sock").string();
-    log_ = (dir_ / "d.log").string();
-    cfg_ = (dir_ / "sim_io.yaml").string();
-    std::ofstream(cfg_) << slurp(kSrc + "/config/sim.yaml") << "\n" << extra_yaml;
-    std::vector<std::string> args{kBin, "--config", cfg_, "--socket", sock_};
-    std::vector<char*> argv;
-    for (auto& s : args) argv.push_back(s.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 2, log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
-    EXPECT_EQ(posix_spawn(&pid_, kBin.c_str(), &fa, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-    for (int i = 0; i < 1000 && fd_ < 0; ++i) {
-      fd_ = connect_to();
-      if (fd_ < 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    EXPECT_GE(fd_, 0) << slurp(log_);
+  Daemon(const std::string& tag, const std::string& extra_yaml)
+      : DaemonProcess("io_" + tag, {write_io_config(tag, extra_yaml), {}, 1000, 0}),
+        cfg_(io_config_path(tag)) {
+    EXPECT_TRUE(connected()) << log();
     wait_for([&](const json& st) { return st["state"] == "READY"; });
   }
   ~Daemon() {
-    if (fd_ >= 0) ::close(fd_);
-    if (pid_ > 0) {
-      ::kill(pid_, SIGTERM);
-      ::waitpid(pid_, nullptr, 0);
-    }
     std::error_code ec;
-    fs::remove_all(dir_, ec);
+    fs::remove(cfg_, ec);
   }
-  json call(const json& req) {
-    const std::string l = req.dump() + "\n";
-    EXPECT_EQ(::send(fd_, l.data(), l.size(), MSG_NOSIGNAL), static_cast<ssize_t>(l.size()));
-    for (;;) {
-      const auto nl = buf_.find('\n');
-      if (nl != std::string::npos) {
-        json r = json::parse(buf_.substr(0, nl));
-        buf_.erase(0, nl + 1);
-        if (r.contains("event")) continue;
-        return r;
-      }
-      char tmp[8192];
-      const ssize_t n = ::recv(fd_, tmp, sizeof(tmp), 0);
-      if (n <= 0) return json{{"ok", false}, {"error", "connection closed"}};
-      buf_.append(tmp, static_cast<std::size_t>(n));
-    }
-  }
-  json ok(const json& req) {
-    json r = call(req);
-    EXPECT_TRUE(r.value("ok", false)) << req.dump() << " -> " << r.dump();
-    return r.value("result", json::object());
-  }
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
   // Polls status until pred holds (bounded: 20 s); returns the last status.
   json wait_for(const std::function<bool(const json&)>& pred) {
-    json st;
-    for (int i = 0; i < 2000; ++i) {
-      st = ok({{"cmd", "status"}});
-      if (pred(st)) return st;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    ADD_FAILURE() << "condition not reached; last status " << st.dump() << "\n" << log();
+    json st = wait_status(pred, 2000);
+    if (!pred(st)) ADD_FAILURE() << "condition not reached; last status " << st.dump() << "\n" << log();
     return st;
   }
-  [[nodiscard]] std::string log() const { return slurp(log_); }
   [[nodiscard]] const std::string& config_path() const { return cfg_; }
-  void signal(int sig) const { ::kill(pid_, sig); }
 
  private:
-  int connect_to() const {
-    const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
-    sockaddr_un a{};
-    a.sun_family = AF_UNIX;
-    std::strncpy(a.sun_path, sock_.c_str(), sizeof(a.sun_path) - 1);
-    if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) {
-      ::close(fd);
-      return -1;
-    }
-    return fd;
-  }
-  fs::path dir_;
-  std::string sock_, log_, buf_, cfg_;
-  pid_t pid_ = -1;
-  int fd_ = -1;
+  std::string cfg_;
 };
 
 std::string replace_all(std::string s, const std::string& from, const std::string& to) {

@@ -24,6 +24,7 @@
 
 #include "config/config.hpp"
 #include "daemon/offline_run.hpp"
+#include "tests/support/daemon_process.hpp"
 
 extern char** environ;
 
@@ -35,111 +36,15 @@ namespace fs = std::filesystem;
 const std::string kBin = std::string(CONTOUR_BINARY_DIR) + "/daemon/contourd";
 const std::string kSrc = CONTOUR_SOURCE_DIR;
 
-std::string slurp(const std::string& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using contour::test::slurp;
+int connect_to(const std::string& path) { return contour::test::connect_unix(path); }
 
-int connect_to(const std::string& path) {
-  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
-  sockaddr_un a{};
-  a.sun_family = AF_UNIX;
-  std::strncpy(a.sun_path, path.c_str(), sizeof(a.sun_path) - 1);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
-
-class Daemon {
+// contourd on config/sim.yaml as a child process with a JSON-lines client (tests/support).
+class Daemon : public contour::test::DaemonProcess {
  public:
-  explicit Daemon(const std::string& tag) {
-    dir_ = fs::temp_directory_path() / ("contourd_test_" + tag + "_" + std::to_string(::getpid()));
-    fs::create_directories(dir_);
-    sock_ = (dir_ / "c.sock").string();
-    log_ = (dir_ / "d.log").string();
-    std::vector<std::string> args{kBin, "--config", kSrc + "/config/sim.yaml", "--socket", sock_};
-    std::vector<char*> argv;
-    for (auto& s : args) argv.push_back(s.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 2, log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
-    EXPECT_EQ(posix_spawn(&pid_, kBin.c_str(), &fa, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-    for (int i = 0; i < 1000; ++i) {
-      const int fd = connect_to(sock_);
-      if (fd >= 0) {
-        fd_ = fd;
-        break;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    EXPECT_GE(fd_, 0) << slurp(log_);
-    // Ready = drives enabled.
-    for (int i = 0; i < 500 && call({{"cmd", "status"}})["result"]["state"] != "READY"; ++i) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
+  explicit Daemon(const std::string& tag) : DaemonProcess(tag, {kSrc + "/config/sim.yaml", {}, 1000, 500}) {
+    EXPECT_TRUE(connected()) << log();
   }
-  ~Daemon() {
-    if (fd_ >= 0) ::close(fd_);
-    if (pid_ > 0 && !exited_) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  json call(const json& req) {
-    const std::string l = req.dump() + "\n";
-    EXPECT_EQ(::send(fd_, l.data(), l.size(), MSG_NOSIGNAL), static_cast<ssize_t>(l.size()));
-    for (;;) {
-      const auto nl = buf_.find('\n');
-      if (nl != std::string::npos) {
-        json r = json::parse(buf_.substr(0, nl));
-        buf_.erase(0, nl + 1);
-        if (r.contains("event")) continue;
-        return r;
-      }
-      char tmp[8192];
-      const ssize_t n = ::recv(fd_, tmp, sizeof(tmp), 0);
-      if (n <= 0) return json{{"ok", false}, {"error", "connection closed"}};
-      buf_.append(tmp, static_cast<std::size_t>(n));
-    }
-  }
-  json ok(const json& req) {
-    json r = call(req);
-    EXPECT_TRUE(r.value("ok", false)) << req.dump() << " -> " << r.dump();
-    return r.value("result", json::object());
-  }
-  json wait_finished(std::uint64_t job) {
-    for (int i = 0; i < 6000; ++i) {
-      const json st = ok({{"cmd", "status"}});
-      if (st["finished_job"].get<std::uint64_t>() >= job && st["state"] != "RUNNING" && st["state"] != "HOLD") break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return ok({{"cmd", "result"}, {"job", job}});
-  }
-  int terminate_and_wait(int sig) {
-    ::kill(pid_, sig);
-    int status = 0;
-    ::waitpid(pid_, &status, 0);
-    exited_ = true;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  }
-  [[nodiscard]] const std::string& sock() const { return sock_; }
-  [[nodiscard]] std::string log() const { return slurp(log_); }
-
- private:
-  fs::path dir_;
-  std::string sock_, log_, buf_;
-  pid_t pid_ = -1;
-  int fd_ = -1;
-  bool exited_ = false;
 };
 
 const std::string kTable2 = kSrc + "/config/programs/table2.ngc";

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <random>
 #include <string>
+#include "tests/support/daemon_process.hpp"
 
 using contour::daemon::ClientInfo;
 using contour::daemon::CommandError;
@@ -24,17 +25,7 @@ std::string temp_socket_path() {
          std::to_string(std::random_device{}() % 100000) + ".sock";
 }
 
-int connect_to(const std::string& path) {
-  int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
-  sockaddr_un a{};
-  a.sun_family = AF_UNIX;
-  std::strncpy(a.sun_path, path.c_str(), sizeof(a.sun_path) - 1);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
+int connect_to(const std::string& path) { return contour::test::connect_unix(path); }
 
 void send_all(int fd, const std::string& s) {
   std::size_t off = 0;
