@@ -12,68 +12,20 @@
 #include "daemon/sim_bus.hpp"
 #include "daemon/telemetry.hpp"
 #include "tests/support/alloc_counter.hpp"
+#include "tests/unit/daemon/loop_rig.hpp"
 
 namespace contour::daemon {
 namespace {
 
-config::Config sim_config() {
-  return config::load_config_file(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml");
-}
-
-std::vector<control::FeedDriveParams> drives(const config::Config& cfg) {
-  std::vector<control::FeedDriveParams> d;
-  for (const auto& a : cfg.machine.axes) {
-    auto p = a.drive;
-    p.period_s = cfg.machine.period_s;
-    d.push_back(p);
-  }
-  return d;
-}
-
-struct Rig {
-  explicit Rig(const config::Config& c)
-      : cfg(c), bus(drives(cfg)), loop(cfg, bus), writer(loop.telemetry(), loop.period_s()),
-        planner(cfg) {}
-  void step(int n = 1) {
-    RtEvent e;
-    for (int i = 0; i < n; ++i) {
-      loop.cycle();
-      while (loop.events().pop(e)) events.push_back(e);
-      if (loop.telemetry().size() > loop.telemetry().capacity() / 2) writer.drain();
-    }
-  }
-  void enable() {
-    loop.post({CommandKind::kEnable});
-    step(5);
-    ASSERT_EQ(loop.status().state, MachineState::kReady);
-  }
-  std::shared_ptr<ProgramJob> load(const std::string& text, std::uint64_t id) {
-    ProgramSource src{"<test>", "", text};
-    const auto st = loop.status();
-    const Eigen::Vector3d start(st.ref_mm[0], st.ref_mm[1], st.ref_mm[2]);
-    planner.validate(src, start);
-    writer.begin_job(id);
-    auto job = planner.start(src, start, id, [this](std::uint64_t j, const control::PlannedSegment& s) {
-      writer.add_segment(j, s);
-    });
-    EXPECT_TRUE(ProgramPlanner::wait_prefill(*job, 30.0));
-    loop.post({CommandKind::kAttachJob, 0, 0.0, 0.0, job.get()});
-    return job;
-  }
-  config::Config cfg;
-  SimBus bus;
-  ServoLoop loop;
-  TelemetryWriter writer;
-  ProgramPlanner planner;
-  std::vector<RtEvent> events;
-};
+using test_rig::Rig;
+using test_rig::sim_config;
 
 const char* kSquare =
     "G21 G90 G17 G64 P0.02\nG01 X20 Y0 F3000\nG01 X20 Y20\nG01 X0 Y20\nG01 X0 Y0\nM2\n";
 
 TEST(ServoLoop, NoAllocationOver10kCyclesRunningAProgram) {
   Rig r(sim_config());
-  r.enable();
+  ASSERT_TRUE(r.enable());
   auto job = r.load(kSquare, 1);
   r.loop.post({CommandKind::kRun});
   r.step(3);
@@ -119,7 +71,7 @@ TEST(ServoLoop, HoldDeceleratesOnThePathAndResumeContinues) {
   const auto cfg = sim_config();
   // Reference run without hold.
   Rig a(cfg);
-  a.enable();
+  ASSERT_TRUE(a.enable());
   a.load(kSquare, 1);
   a.loop.post({CommandKind::kRun});
   for (int i = 0; i < 20000 && a.loop.status().finished_job != 1; ++i) a.step();
@@ -127,7 +79,7 @@ TEST(ServoLoop, HoldDeceleratesOnThePathAndResumeContinues) {
   const double free_max = a.writer.stats(1).max_contour_error_um;
 
   Rig r(cfg);
-  r.enable();
+  ASSERT_TRUE(r.enable());
   r.load(kSquare, 1);
   r.loop.post({CommandKind::kRun});
   r.step(500);  // on the first edge at full feed
@@ -154,7 +106,7 @@ TEST(ServoLoop, HoldDeceleratesOnThePathAndResumeContinues) {
 
 TEST(ServoLoop, StopDeceleratesAndFlushes) {
   Rig r(sim_config());
-  r.enable();
+  ASSERT_TRUE(r.enable());
   auto job = r.load(kSquare, 7);
   r.loop.post({CommandKind::kRun});
   r.step(400);
@@ -174,7 +126,7 @@ TEST(ServoLoop, StopDeceleratesAndFlushes) {
 
 TEST(ServoLoop, EstopIsImmediateAndResetReEnables) {
   Rig r(sim_config());
-  r.enable();
+  ASSERT_TRUE(r.enable());
   r.load(kSquare, 1);
   r.loop.post({CommandKind::kRun});
   r.step(400);
@@ -197,7 +149,7 @@ TEST(ServoLoop, EstopIsImmediateAndResetReEnables) {
 
 TEST(ServoLoop, DriveFaultFaultsWithCauseAndResetNeedsTheCauseGone) {
   Rig r(sim_config());
-  r.enable();
+  ASSERT_TRUE(r.enable());
   r.bus.inject_drive_fault(1, true);
   r.step(2);
   auto st = r.loop.status();
@@ -216,7 +168,7 @@ TEST(ServoLoop, DriveFaultFaultsWithCauseAndResetNeedsTheCauseGone) {
 TEST(ServoLoop, FollowingErrorFaultsWhenTheGainIsTooLow) {
   auto cfg = sim_config();
   Rig r(cfg);
-  r.enable();
+  ASSERT_TRUE(r.enable());
   // Gains staged while READY, swapped at the next cycle boundary.
   auto p = r.loop.active_params();
   for (auto& a : p.axis) a.kp = 0.01;
@@ -245,7 +197,7 @@ TEST(ServoLoop, FollowingErrorFaultsWhenTheGainIsTooLow) {
 
 TEST(ServoLoop, JogMovesTheAxisByTheDistance) {
   Rig r(sim_config());
-  r.enable();
+  ASSERT_TRUE(r.enable());
   r.loop.post({CommandKind::kJog, 2, 10.0, -1.5});
   r.step(3000);
   const auto st = r.loop.status();
@@ -256,7 +208,7 @@ TEST(ServoLoop, JogMovesTheAxisByTheDistance) {
 
 TEST(ServoLoop, SetPositionAndSoftLimitOnTheReferenceEachCycle) {
   Rig r(sim_config());
-  r.enable();
+  ASSERT_TRUE(r.enable());
   r.loop.post({CommandKind::kSetPosition, 0, 199.0, 0.0});
   r.step(3);
   EXPECT_DOUBLE_EQ(r.loop.status().act_mm[0], 199.0);
