@@ -1,8 +1,8 @@
 // Google Benchmark of the seed-000 RT cycle: contour-error model + 3 axis controllers + coupling +
 // delay predictor (one cycle), the model alone, and the window update alone.
-// Build (until wired into CMake): g++ -O2 -std=c++20 -I. -isystem /usr/include/eigen3
-//   tools/bench/bench_control.cpp control/contour_error.cpp control/servo_controller.cpp
-//   control/feed_drive.cpp -lbenchmark -lpthread -o /tmp/bench_control
+// Built by CMake with CONTOUR_BUILD_BENCHMARKS (tools/bench.sh). BM_Cycle pauses the timer for
+// the reference generation each iteration: its median includes that overhead (bench_cycle's
+// BM_Cycle3Axis is the full-cycle figure).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
