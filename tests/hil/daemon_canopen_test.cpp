@@ -106,6 +106,29 @@ TEST(DaemonCanopen, Table2OverVcanGivesTheOfflineFigures) {
   EXPECT_NEAR(hil_rms, off.stats.rms_contour_error_um(), 1e-3);
   EXPECT_EQ(res["samples"].get<std::uint64_t>(), off.stats.samples);
   EXPECT_GT(hil_max, 0.1);  // the run really moved (Table 2: some um of contour error)
+  {
+    // The same comparison against the `contour-sim run` binary (issue 7: "the same contour-error
+    // figures as contour-sim with the same config"): its last stdout line is one JSON object.
+    const std::string cmd = std::string(CONTOUR_BINARY_DIR) + "/tools/contour-sim run --config " +
+                            kHil + " --program " + kTable2 + " 2>&1";
+    FILE* p = ::popen(cmd.c_str(), "r");
+    ASSERT_NE(p, nullptr);
+    std::string out, last;
+    char buf[4096];
+    while (std::fgets(buf, sizeof(buf), p) != nullptr) out += buf;
+    const int rc = ::pclose(p);
+    std::istringstream lines(out);
+    for (std::string l; std::getline(lines, l);)
+      if (!l.empty()) last = l;
+    EXPECT_EQ(rc, 0) << out;
+    const json cs = json::parse(last, nullptr, false);
+    ASSERT_TRUE(cs.is_object()) << out;
+    std::printf("[figure] contour-sim run --config config/hil.yaml: max %.9f um, rms %.9f um\n",
+                cs["max_contour_error_um"].get<double>(), cs["rms_contour_error_um"].get<double>());
+    EXPECT_NEAR(hil_max, cs["max_contour_error_um"].get<double>(), 1e-3) << out;
+    EXPECT_NEAR(hil_rms, cs["rms_contour_error_um"].get<double>(), 1e-3) << out;
+    EXPECT_EQ(res["samples"].get<std::uint64_t>(), cs["samples"].get<std::uint64_t>()) << out;
+  }
   EXPECT_EQ(d.terminate_and_wait(SIGTERM), 0) << d.log();
   const std::string summary = sim.stop();
   EXPECT_EQ(summary.find("operation enabled"), std::string::npos) << summary;  // drives disabled

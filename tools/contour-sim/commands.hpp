@@ -7,4 +7,5 @@ int run_blend(int argc, char** argv);
 int run_contour(int argc, char** argv);
 int run_force(int argc, char** argv);
 int run_circle(int argc, char** argv);
+int run_run(int argc, char** argv);
 }  // namespace contour::sim

@@ -15,6 +15,7 @@ int usage(FILE* out) {
       "  contour  contour-error model and P / PID / cross-coupled control (seed 000)\n"
       "  force    2-DOF cutting-force / position control (seed 001)\n"
       "  circle   circular test, servo-gain mismatch estimation and compensation (seed 003)\n"
+      "  run      a part program through contourd's own loop code, offline (same figures as the daemon)\n"
       "Run 'contour-sim <command> --help' for the options of a command.\n",
       out);
   return 2;
@@ -33,6 +34,7 @@ int main(int argc, char** argv) {
     if (cmd == "contour") return contour::sim::run_contour(argc - 1, argv + 1);
     if (cmd == "force") return contour::sim::run_force(argc - 1, argv + 1);
     if (cmd == "circle") return contour::sim::run_circle(argc - 1, argv + 1);
+    if (cmd == "run") return contour::sim::run_run(argc - 1, argv + 1);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "contour-sim %s: error: %s\n", cmd.c_str(), e.what());
     return 1;

@@ -418,7 +418,7 @@ int main(int argc, char** argv) {
   watch->add_option("--interval", watch_interval, "seconds between updates")
       ->check(CLI::Range(0.01, 3600.0));
   watch->add_option("--count", watch_count, "stop after N updates (0: until Ctrl-C)");
-  auto* force = app.add_subcommand("force", "force on | force off | force ref NEWTON");
+  auto* force = app.add_subcommand("force", "force on [NEWTON] | force off | force ref NEWTON | force status");
   force->add_option("ARGS", force_args)->required();
   auto* circle = app.add_subcommand(
       "circle-test", "seed 003 circle test: per-axis gain and time constant, matched gains");
@@ -536,9 +536,27 @@ int main(int argc, char** argv) {
     } else if (cmd == "override") {
       req["percent"] = pct;
     } else if (cmd == "force") {
-      // The daemon answers "not wired yet" today; the request shape is the obvious one.
-      req["action"] = force_args[0];
-      if (force_args.size() > 1) req["reference_N"] = std::stod(force_args[1]);
+      // force on [N] | force off | force ref N | force status (query): the daemon's `force`
+      // command takes action "on"/"off" and/or reference_N.
+      const std::string& a = force_args[0];
+      if (a == "on" || a == "off") {
+        req["action"] = a;
+      } else if (a != "ref" && a != "status") {
+        std::cerr << "contourctl: force on [NEWTON] | force off | force ref NEWTON | force status\n";
+        return kExitUsage;
+      }
+      if (force_args.size() > 1) {
+        char* end = nullptr;
+        const double n = std::strtod(force_args[1].c_str(), &end);
+        if (end == force_args[1].c_str() || *end != '\0' || !std::isfinite(n)) {
+          std::cerr << "contourctl: force: '" << force_args[1] << "' is not a force in newtons\n";
+          return kExitUsage;
+        }
+        req["reference_N"] = n;
+      } else if (a == "ref") {
+        std::cerr << "contourctl: force ref NEWTON\n";
+        return kExitUsage;
+      }
     } else if (cmd == "record") {
       if (record_args[0] != "start" && record_args[0] != "stop") {
         std::cerr << "contourctl: record start [PATH] | record stop [--plot F.png]\n";
