@@ -192,6 +192,11 @@ int cmd_run(Client& c, const RunOptions& o, bool as_json) {
     if (std::chrono::steady_clock::now() > until)
       throw ErrorReply("timed out waiting for the program");
     max_eps_um = std::max(max_eps_um, st.value("contour_error_um", 0.0));
+    // The daemon's running figure for this job (true contour error to the planned path, from
+    // every telemetry sample), not just the polled samples.
+    if (st.contains("program") && st["program"].value("job", std::uint64_t{0}) == job) {
+      max_eps_um = std::max(max_eps_um, st["program"].value("max_contour_error_um", 0.0));
+    }
     const double prog = st.value("progress_mm", 0.0);
     // Block index from the current source line (status has no block index): motion blocks of the
     // file parsed here whose line is at or before it.
