@@ -292,14 +292,7 @@ void ServoLoop::enter_estop(FaultCause cause) noexcept {
 
 void ServoLoop::apply_command(const LoopCommand& c) noexcept {
   const MachineState st = sm_.state();
-  auto refuse = [&]() {
-    RtEvent e;
-    e.cycle = cycle_;
-    e.kind = EventKind::kCommandRefused;
-    e.from = e.to = st;
-    e.command = c.kind;
-    events_.push(e);
-  };
+  auto refuse = [&]() { refuse_command(c.kind); };
   switch (c.kind) {
     case CommandKind::kEnable:
       transition(sm_.apply(Request::kEnable), FaultCause::kNone);
@@ -421,6 +414,15 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
   }
 }
 
+void ServoLoop::refuse_command(CommandKind k) noexcept {
+  RtEvent e;
+  e.cycle = cycle_;
+  e.kind = EventKind::kCommandRefused;
+  e.from = e.to = sm_.state();
+  e.command = k;
+  events_.push(e);
+}
+
 bool ServoLoop::try_reset() noexcept {
   bool gone = !fb_.heartbeat_lost && !fb_.bus_error && !(io_ != nullptr && io_->estop_tripped());
   for (int i = 0; i < axes_; ++i) gone = gone && !fb_.axis[static_cast<std::size_t>(i)].fault;
@@ -474,12 +476,7 @@ void ServoLoop::cycle() noexcept {
     } else if (try_reset()) {
       reset_pending_cycles_ = 0;
     } else if (reset_pending_cycles_ == 0) {
-      RtEvent e;
-      e.cycle = cycle_;
-      e.kind = EventKind::kCommandRefused;
-      e.from = e.to = st;
-      e.command = CommandKind::kReset;
-      events_.push(e);
+      refuse_command(CommandKind::kReset);  // the causes did not clear within the window
     }
   }
   LoopCommand c;

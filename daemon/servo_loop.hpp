@@ -267,6 +267,7 @@ class ServoLoop {
   void emit(EventKind k, FaultCause c = FaultCause::kNone, int axis = -1, double value = 0.0,
             double limit = 0.0) noexcept;
   void detach_job(bool ok) noexcept;
+  void refuse_command(CommandKind k) noexcept;  // kCommandRefused event
   bool try_reset() noexcept;  // FAULT/ESTOP -> enable when every cause is gone
   void hold_here() noexcept;  // reference := current measured position, controller state reset
   void publish() noexcept;

@@ -64,10 +64,7 @@ json wait_job(Client& c, std::uint64_t job, double timeout_s) {
   const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   for (;;) {
     const json st = c.call({{"cmd", "status"}});
-    const std::string s = st.at("state").get<std::string>();
-    const bool ended =
-        st.at("finished_job").get<std::uint64_t>() >= job && s != "RUNNING" && s != "HOLD";
-    if (ended || s == "FAULT" || s == "ESTOP" || s == "DISABLED") break;
+    if (job_ended(st, job)) break;
     if (std::chrono::steady_clock::now() > until)
       throw ErrorReply("circle-test: timed out waiting for the circle");
     std::this_thread::sleep_for(std::chrono::milliseconds(50));

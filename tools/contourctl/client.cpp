@@ -113,4 +113,11 @@ json Client::call(json req) {
   }
 }
 
+bool job_ended(const nlohmann::json& status, std::uint64_t job) {
+  const std::string s = status.at("state").get<std::string>();
+  const bool finished =
+      status.at("finished_job").get<std::uint64_t>() >= job && s != "RUNNING" && s != "HOLD";
+  return finished || s == "FAULT" || s == "ESTOP" || s == "DISABLED";
+}
+
 }  // namespace contour::ctl

@@ -2,6 +2,7 @@
 // contourctl's connection to contourd's command socket (JSON lines, daemon/command_server.hpp):
 // one request {"id", "cmd", ...} per line, replies {"id", "ok", "result"|"error"}; lines carrying
 // "event" are subscription traffic and skipped.
+#include <cstdint>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
@@ -28,6 +29,10 @@ struct ErrorReply : std::runtime_error {
 // --socket, else $CONTOURD_SOCKET, else /run/contourd/contourd.sock when it exists, else
 // ${XDG_RUNTIME_DIR:-/tmp}/contourd.sock (config/sim.yaml's default).
 std::string default_socket();
+
+// A status reply says program `job` is over: it finished and the machine is neither RUNNING nor
+// HOLD, or the machine stopped (FAULT, ESTOP, DISABLED).
+bool job_ended(const nlohmann::json& status, std::uint64_t job);
 
 class Client {
  public:

@@ -185,10 +185,8 @@ int cmd_run(Client& c, const RunOptions& o, bool as_json) {
       break;
     }
     const json st = c.call({{"cmd", "status"}});
+    if (job_ended(st, job)) break;
     const std::string s = st.at("state").get<std::string>();
-    const bool ended =
-        st.at("finished_job").get<std::uint64_t>() >= job && s != "RUNNING" && s != "HOLD";
-    if (ended || s == "FAULT" || s == "ESTOP" || s == "DISABLED") break;
     if (std::chrono::steady_clock::now() > until)
       throw ErrorReply("timed out waiting for the program");
     max_eps_um = std::max(max_eps_um, st.value("contour_error_um", 0.0));
