@@ -23,6 +23,7 @@ std::string_view to_string(FaultCause c) noexcept {
     case FaultCause::kSoftLimit: return "soft limit";
     case FaultCause::kVelocityLimit: return "velocity limit";
     case FaultCause::kDriveFault: return "drive fault";
+    case FaultCause::kDriveDisabled: return "drive disabled";
     case FaultCause::kHeartbeatLost: return "heartbeat lost";
     case FaultCause::kMissedTpdo: return "missed TPDO streak";
     case FaultCause::kForceStale: return "force sample stale";

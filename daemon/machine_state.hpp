@@ -20,6 +20,7 @@ enum class FaultCause : std::uint8_t {
   kSoftLimit,
   kVelocityLimit,
   kDriveFault,
+  kDriveDisabled,  // left operation enabled without a fault bit
   kHeartbeatLost,
   kMissedTpdo,
   kForceStale,

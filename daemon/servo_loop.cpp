@@ -498,8 +498,6 @@ void ServoLoop::cycle() noexcept {
   }
 
   MachineState st = sm_.state();
-  const bool motion = st == MachineState::kReady || st == MachineState::kRunning ||
-                      st == MachineState::kHold;
 
   // 4. Reference.
   ref_prev_ = ref_;
@@ -513,6 +511,11 @@ void ServoLoop::cycle() noexcept {
       st = sm_.state();
     }
   }
+  // After the ENABLING -> READY step: the cycle that reaches READY already commands the drives
+  // enabled (judged before it, that cycle sent "disable voltage" and the drives dropped out of
+  // operation enabled for ~8 cycles right after READY — a `run` in that window met disabled drives).
+  const bool motion = st == MachineState::kReady || st == MachineState::kRunning ||
+                      st == MachineState::kHold;
   if (job_ != nullptr) {
     SegmentRecord rec;
     for (int n = 0; n < kMaxSegmentsPerCycle && job_->interp.free_slots() > 0 &&
@@ -655,6 +658,13 @@ void ServoLoop::cycle() noexcept {
       const auto a = static_cast<std::size_t>(i);
       if (fb_.axis[a].fault) {
         raise_fault(FaultCause::kDriveFault, i, 1.0, 0.0);
+        break;
+      }
+      // A drive that leaves operation enabled without a fault (its enable input or STO opened, a
+      // local operator, a stray controlword) no longer follows the commands: stop everything.
+      // The master would otherwise walk it back to operation enabled on its own.
+      if (motion && fb_.axis[a].fresh && !fb_.axis[a].enabled) {
+        raise_fault(FaultCause::kDriveDisabled, i, 1.0, 0.0);
         break;
       }
       if (missed_streak_[a] >= cfg_.safety.missed_tpdo_streak) {

@@ -30,6 +30,7 @@ SimBus::SimBus(const std::vector<control::FeedDriveParams>& drives,
     drive_[i].configure(p);
   }
   for (auto& f : fault_) f = false;
+  for (auto& d : disabled_) d = false;
 }
 
 void SimBus::begin_cycle() noexcept {
@@ -37,7 +38,8 @@ void SimBus::begin_cycle() noexcept {
   // the newest one.
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
-    const double v = (mode_ == DriveMode::kEnabled && !fault_[a]) ? latched_v_[a] : 0.0;
+    const double v =
+        (mode_ == DriveMode::kEnabled && !fault_[a] && !disabled_[a]) ? latched_v_[a] : 0.0;
     drive_[a].step_velocity(v);
     latched_v_[a] = received_v_[a];
   }
@@ -70,7 +72,7 @@ void SimBus::read(BusFeedback& fb) noexcept {
     }
     f.fresh = true;
     f.fault = fault_[a];
-    f.enabled = mode_ == DriveMode::kEnabled && !f.fault;
+    f.enabled = mode_ == DriveMode::kEnabled && !f.fault && !disabled_[a];
     f.statusword = f.fault ? 0x0008 : (f.enabled ? 0x0027 : 0x0040);
   }
   if (can_cpm_[0] > 0.0) can_have_last_ = true;

@@ -42,6 +42,12 @@ class SimBus final : public AxisBus {
 
   // Fault injection for tests (thread-safe: read by the RT thread each cycle).
   void inject_drive_fault(int axis, bool on) noexcept { fault_[static_cast<std::size_t>(axis)] = on; }
+  // The drive leaves operation enabled without a fault (its enable input / STO opened).
+  void inject_drive_disabled(int axis, bool on) noexcept {
+    disabled_[static_cast<std::size_t>(axis)] = on;
+  }
+  // The mode of the last write() (what the RPDOs of this cycle asked for).
+  [[nodiscard]] DriveMode written_mode() const noexcept { return received_mode_; }
 
  private:
   int axes_ = 0;
@@ -51,6 +57,7 @@ class SimBus final : public AxisBus {
   DriveMode mode_ = DriveMode::kDisabled;
   DriveMode received_mode_ = DriveMode::kDisabled;
   std::array<std::atomic<bool>, kMaxAxes> fault_{};
+  std::array<std::atomic<bool>, kMaxAxes> disabled_{};
   std::uint64_t cycle_ = 0;
   std::array<double, kMaxAxes> can_cpm_{};  // 0 = ideal bus
   bool can_velocity_mapped_ = false;

@@ -165,6 +165,44 @@ TEST(ServoLoop, DriveFaultFaultsWithCauseAndResetNeedsTheCauseGone) {
   EXPECT_EQ(r.loop.status().state, MachineState::kReady);
 }
 
+TEST(ServoLoop, TheCycleThatReachesReadyAlreadyCommandsTheDrivesEnabled) {
+  // Regression: READY was judged before the ENABLING -> READY step, so that cycle wrote
+  // "disabled" and the drives dropped out of operation enabled right after READY.
+  Rig r(sim_config());
+  r.loop.post({CommandKind::kEnable});
+  int ready_at = -1;
+  for (int k = 0; k < 20; ++k) {
+    r.step();
+    const bool ready = r.loop.status().state == MachineState::kReady;
+    if (ready && ready_at < 0) ready_at = k;
+    if (ready) {
+      EXPECT_EQ(r.bus.written_mode(), DriveMode::kEnabled) << "cycle " << k << ", READY at " << ready_at;
+    }
+  }
+  ASSERT_GE(ready_at, 0);
+  EXPECT_TRUE(r.loop.status().drives_enabled);
+}
+
+TEST(ServoLoop, ADriveLeavingOperationEnabledWithoutAFaultStopsTheMachine) {
+  Rig r(sim_config());
+  ASSERT_TRUE(r.enable());
+  r.step(20);
+  ASSERT_EQ(r.loop.status().state, MachineState::kReady);
+  r.bus.inject_drive_disabled(2, true);
+  r.step(2);
+  auto st = r.loop.status();
+  EXPECT_EQ(st.state, MachineState::kFault);
+  EXPECT_EQ(st.cause, FaultCause::kDriveDisabled);
+  EXPECT_EQ(st.fault_axis, 2);
+  // Reset while the drive stays disabled: the loop waits in ENABLING, never READY.
+  r.loop.post({CommandKind::kReset});
+  r.step(50);
+  EXPECT_NE(r.loop.status().state, MachineState::kReady);
+  r.bus.inject_drive_disabled(2, false);
+  r.step(10);
+  EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+}
+
 TEST(ServoLoop, FollowingErrorFaultsWhenTheGainIsTooLow) {
   auto cfg = sim_config();
   Rig r(cfg);
