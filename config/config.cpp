@@ -62,6 +62,17 @@ Config parse_root(const YAML::Node& root, const std::string& name) {
     {
       Section sec = top.child("spindle");
       cfg.spindle = parse_spindle(sec);
+      if (cfg.spindle.type == "canopen") {
+        if (!cfg.bus.spindle)
+          sec.error("type", "canopen needs the spindle node on the bus (bus.spindle)");
+        else if (cfg.bus.spindle->node_id != cfg.spindle.node_id)
+          sec.error("node_id", "must be bus.spindle.node_id (" +
+                                   std::to_string(cfg.bus.spindle->node_id) + ")");
+      } else if (cfg.spindle.type == "sim" && cfg.bus.type != "sim") {
+        sec.error("type", "sim is the built-in simulated machine's spindle (bus.type: sim)");
+      } else if (cfg.bus.spindle && cfg.spindle.type != "none") {
+        sec.error("type", "bus.spindle is a CANopen spindle: type must be canopen");
+      }
     }
     {
       Section sec = top.child("gpio");

@@ -9,7 +9,7 @@ namespace dm = drivers::modbus;
 SpindleConfig parse_spindle(Section& s) {
   SpindleConfig cfg;
   if (!s.present()) return cfg;
-  cfg.type = s.choice("type", "none", {"none", "canopen", "modbus_vfd"});
+  cfg.type = s.choice("type", "none", {"none", "canopen", "modbus_vfd", "sim"});
   if (cfg.type == "canopen")
     cfg.node_id = static_cast<int>(s.required_integer("node_id", 1, 127));
   else if (s.has("node_id"))
@@ -22,6 +22,11 @@ SpindleConfig parse_spindle(Section& s) {
   l.at_speed_tolerance_rpm = s.number("at_speed_tolerance_rpm", 50.0, 0.0, 1e5);
   l.at_speed_tolerance_fraction = s.number("at_speed_tolerance_pct", 2.0, 0.0, 100.0) / 100.0;
   cfg.at_speed_timeout_s = s.number("at_speed_timeout_s", 10.0, 0.1, 600.0);
+  const std::string wait = s.choice("at_speed_wait", "always", {"always", "force", "never"});
+  cfg.at_speed_wait = wait == "always"  ? SpindleConfig::Wait::kAlways
+                      : wait == "force" ? SpindleConfig::Wait::kForce
+                                        : SpindleConfig::Wait::kNever;
+  cfg.sim_tau_s = s.number("sim_tau_s", 0.2, 0.001, 60.0);
 
   if (cfg.type != "modbus_vfd") {
     if (s.has("vfd")) s.error("vfd", "only for type: modbus_vfd");

@@ -2,14 +2,17 @@
 // `spindle:` section (issue 8). Absent -> type none.
 //
 // spindle:
-//   type: modbus_vfd          # none | canopen | modbus_vfd
-//   node_id: 5                # canopen (CiA 402 velocity mode)
+//   type: modbus_vfd          # none | canopen | modbus_vfd | sim
+//   node_id: 5                # canopen (CiA 402 velocity mode): must be bus.spindle's node_id
+//   sim_tau_s: 0.2            # speed lag of the simulated spindle (type sim; the SimBus model
+//                             # of a canopen spindle in offline runs)
 //   min_rpm: 500
 //   max_rpm: 12000
 //   rate_rpm_s: 2000
 //   at_speed_tolerance_rpm: 50
 //   at_speed_tolerance_pct: 2
-//   at_speed_timeout_s: 10    # feed with force control waits at most this long for at-speed
+//   at_speed_timeout_s: 10    # a feed move waits at most this long for at-speed, then FAULT
+//   at_speed_wait: always     # always | force (only with force control on) | never
 //   vfd:                      # modbus_vfd
 //     transport: rtu          # rtu | tcp
 //     device: /dev/ttyUSB1
@@ -39,6 +42,9 @@ struct SpindleConfig {
   int node_id = 0;  // canopen
   drivers::SpindleLimits limits{};
   double at_speed_timeout_s = 10.0;
+  enum class Wait { kAlways, kForce, kNever };
+  Wait at_speed_wait = Wait::kAlways;
+  double sim_tau_s = 0.2;
   drivers::modbus::VfdSettings vfd{};  // modbus_vfd; vfd.limits == limits
 };
 

@@ -33,6 +33,15 @@ void BlendPlanner::push(const Block& b) {
   if (ended_) return;
   switch (b.kind) {
     case BlockKind::kMotion: {
+      // A feed move after a spindle start or speed change waits, at an exact stop, until the
+      // spindle is at speed (rapids do not cut: they run while the spindle accelerates).
+      if (!b.rapid && b.spindle != SpindleDir::kOff &&
+          (b.spindle != synced_spindle_ || b.spindle_rpm != synced_rpm_)) {
+        barrier(SegmentKind::kSpindleSync, "", b, 0.0);
+        synced_spindle_ = b.spindle;
+        synced_rpm_ = b.spindle_rpm;
+      }
+      if (b.spindle == SpindleDir::kOff) synced_spindle_ = SpindleDir::kOff;
       const BlendMode mode = p_.force_mode.value_or(b.blend);
       double tol = p_.force_tolerance_mm.value_or(mode == BlendMode::kLimited ? b.tolerance_mm : p_.default_tolerance_mm);
       if (mode == BlendMode::kLimited && b.tolerance_mm <= 0.0 && !p_.force_tolerance_mm) tol = p_.default_tolerance_mm;
@@ -78,6 +87,11 @@ void BlendPlanner::barrier(SegmentKind kind, const std::string& msg, const Block
     s.start_mm = s.end_mm = pos_;
     s.line = b.line;
     s.path_start_mm = path_mm_;
+    s.spindle = b.spindle;
+    s.spindle_rpm = b.spindle_rpm;
+    s.mist = b.mist;
+    s.flood = b.flood;
+    s.tool = b.tool;
     if (!msg.empty()) {
       messages_.push_back(msg);
       s.message_id = static_cast<int>(messages_.size()) - 1;

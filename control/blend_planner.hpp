@@ -154,6 +154,9 @@ class BlendPlanner {
   std::deque<PlannedSegment> out_;
   std::int64_t earliest_start_ = 0;  // after barriers
   bool stop_before_next_ = true;
+  // Spindle state the last kSpindleSync marker waited for (feed moves after a change wait).
+  SpindleDir synced_spindle_ = SpindleDir::kOff;
+  double synced_rpm_ = 0.0;
   std::vector<Eigen::Vector3d> chord_buf_;
   std::vector<std::string> messages_;
   std::function<void(const CornerReport&)> corner_cb_;

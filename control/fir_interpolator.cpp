@@ -135,7 +135,7 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
   if (holding_) {
     if (!resumed_hold_) {
       ovr_ = 0.0;
-      last_.status = InterpStatus::kHolding;
+      last_.status = hold_status_;
       out = last_;
       return out.status;
     }
@@ -183,8 +183,14 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
           head_ = (head_ + 1) % cap_;
           --count_;
         }
+      } else if (marker->kind == SegmentKind::kSpindleSync) {
+        st = InterpStatus::kSpindleWait;
+        hold_status_ = st;
+        holding_ = true;
+        ovr_ = 0.0;
       } else {
         st = InterpStatus::kHolding;
+        hold_status_ = st;
         holding_ = true;
         last_.message_id = marker->message_id;
         ovr_ = 0.0;
@@ -205,11 +211,15 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
     q += frac * (q1 - q);
     prog0 += frac * (prog1 - prog0);
   }
-  if (st == InterpStatus::kHolding) {
+  if (st == InterpStatus::kHolding || st == InterpStatus::kSpindleWait) {
     drop_finished(t0);
     if (count_ > 0) {
       // The hold marker must now be at the front (motion before it has stopped).
       last_.message_id = at(0).kind == SegmentKind::kMotion ? -1 : at(0).message_id;
+      if (st == InterpStatus::kSpindleWait && at(0).kind == SegmentKind::kSpindleSync) {
+        last_.spindle = at(0).spindle;  // the new speed is commanded while the path waits
+        last_.spindle_rpm = at(0).spindle_rpm;
+      }
     }
   }
   if (st == InterpStatus::kDone) {

@@ -41,7 +41,10 @@ class FirFilter {
   std::vector<double> pi_;  // prefix sums of i*w_i (size L+1)
 };
 
-enum class SegmentKind : std::uint8_t { kMotion, kHold, kOptionalHold, kEnd };
+// kSpindleSync: exact stop, the marker's spindle state is output at once, and the interpolator
+// waits (InterpStatus::kSpindleWait) until resume() — the loop resumes it when the spindle is at
+// speed (LinuxCNC's spindle.N.at-speed before a feed move).
+enum class SegmentKind : std::uint8_t { kMotion, kHold, kOptionalHold, kEnd, kSpindleSync };
 
 // One planned micro-block (a line or an arc chord) with its command start time. Produced by
 // BlendPlanner (non-RT), consumed by Interpolator (RT). Trivially copyable.
@@ -68,7 +71,8 @@ enum class InterpStatus : std::uint8_t {
   kRunning,
   kHolding,   // at M0/M1/M6: waits for resume()
   kStarved,   // queue ran dry mid-program: stopped on the path (exact stop at the last vertex)
-  kDone       // end of program reached; reference is exactly the final point
+  kDone,      // end of program reached; reference is exactly the final point
+  kSpindleWait  // stopped at a kSpindleSync marker with its spindle state: waits for resume()
 };
 
 struct InterpOutput {
@@ -131,6 +135,7 @@ class Interpolator {
   std::int64_t shift_ = 0;  // added to start_cycle after a starvation stop
   double ovr_ = 0.0;  // applied override
   bool holding_ = false;
+  InterpStatus hold_status_ = InterpStatus::kHolding;  // kHolding or kSpindleWait
   bool resumed_hold_ = false;
   bool done_ = false;
   InterpOutput last_{};

@@ -28,8 +28,18 @@ struct AxisFeedback {
   std::uint16_t statusword = 0;
 };
 
+// The spindle drive on the same bus (CANopen bus.spindle, or the simulated machine's spindle).
+struct SpindleFeedback {
+  bool present = false;     // this bus has a spindle with speed feedback
+  bool fresh = false;       // a TPDO arrived this cycle (CAN spindles answer every n-th SYNC)
+  double actual_rpm = 0.0;  // last reported speed, signed (+ = M3)
+  bool enabled = false;     // CiA 402 "operation enabled"
+  bool fault = false;
+};
+
 struct BusFeedback {
   std::array<AxisFeedback, kMaxAxes> axis{};
+  SpindleFeedback spindle{};
   int axes = 0;
   bool heartbeat_lost = false;
   int heartbeat_lost_node = 0;

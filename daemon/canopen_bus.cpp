@@ -64,6 +64,9 @@ void CanopenBus::init(const config::Config& cfg) {
   for (std::size_t i = 0; i < mcfg_.nodes.size(); ++i) {
     if (mcfg_.nodes[i].name == "spindle") spindle_index_ = static_cast<int>(i);
   }
+  spindle_velocity_mapped_ =
+      spindle_index_ >= 0 &&
+      mcfg_.nodes[static_cast<std::size_t>(spindle_index_)].tpdo.find(0x606C) >= 0;
   for (int i = 0; i < axes_; ++i) {
     velocity_mapped_[static_cast<std::size_t>(i)] =
         mcfg_.nodes[static_cast<std::size_t>(i)].tpdo.find(0x606C) >= 0;
@@ -223,6 +226,16 @@ void CanopenBus::read(BusFeedback& fb) noexcept {
               r.state == co::Cia402State::kFaultReactionActive ||
               (r.faults & (static_cast<std::uint8_t>(co::NodeFault::kDriveFault) |
                            static_cast<std::uint8_t>(co::NodeFault::kUnexpectedBootUp))) != 0;
+  }
+  if (spindle_index_ >= 0) {
+    const co::NodeRuntime& r = master_->node(static_cast<std::size_t>(spindle_index_));
+    SpindleFeedback& s = fb.spindle;
+    s.present = spindle_velocity_mapped_;
+    s.fresh = r.tpdo_fresh;
+    // 0x606C in the simulated spindle drive's unit, rpm (the same unit as the 0x60FF target).
+    if (r.tpdo_fresh && spindle_velocity_mapped_) s.actual_rpm = static_cast<double>(r.velocity_counts_s);
+    s.enabled = r.state == co::Cia402State::kOperationEnabled;
+    s.fault = r.state == co::Cia402State::kFault || r.state == co::Cia402State::kFaultReactionActive;
   }
   const auto bs = can_->bus_state();
   // A SYNC that could not be sent at all (not a counted ENOBUFS drop), bus-off or error-passive.

@@ -106,6 +106,7 @@ class CanopenBus final : public AxisBus {
   bool lockstep_ = false;
   int axes_ = 0;
   int spindle_index_ = -1;  // node index of the spindle in the master, or -1
+  bool spindle_velocity_mapped_ = false;  // 0x606C in the spindle's TPDO: speed feedback
   std::array<double, kMaxAxes> counts_per_mm_{};
   std::array<bool, kMaxAxes> velocity_mapped_{};  // 0x606C in the axis' TPDO
   // CSP axes (bus mode csp): the velocity commands are integrated into a position target

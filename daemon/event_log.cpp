@@ -122,6 +122,9 @@ std::string describe(const RtEvent& e) {
       o << "force samples valid again (force control stays off until 'force on')";
       break;
     case EventKind::kLimitsSwapped: o << "safety limits generation " << e.value << " active"; break;
+    case EventKind::kSpindleAtSpeed:
+      o << "spindle at speed (" << e.limit << " rpm) after " << e.value << " s: feed move starts";
+      break;
   }
   return o.str();
 }

@@ -24,6 +24,8 @@ std::string_view to_string(FaultCause c) noexcept {
     case FaultCause::kVelocityLimit: return "velocity limit";
     case FaultCause::kDriveFault: return "drive fault";
     case FaultCause::kDriveDisabled: return "drive disabled";
+    case FaultCause::kSpindleFault: return "spindle fault";
+    case FaultCause::kSpindleNotAtSpeed: return "spindle not at speed";
     case FaultCause::kHeartbeatLost: return "heartbeat lost";
     case FaultCause::kMissedTpdo: return "missed TPDO streak";
     case FaultCause::kForceStale: return "force sample stale";

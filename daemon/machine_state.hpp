@@ -21,6 +21,8 @@ enum class FaultCause : std::uint8_t {
   kVelocityLimit,
   kDriveFault,
   kDriveDisabled,  // left operation enabled without a fault bit
+  kSpindleFault,
+  kSpindleNotAtSpeed,
   kHeartbeatLost,
   kMissedTpdo,
   kForceStale,

@@ -156,6 +156,8 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
     force_requested_ = cfg.force.enable;
   }
   force_ref_N_ = cfg.force.reference_N;
+  spindle_present_ = cfg.spindle.type != "none" || cfg.bus.spindle.has_value();
+  spindle_ramp_ = drivers::SpindleRamp(cfg.spindle.limits);
   publish();
 }
 
@@ -426,6 +428,7 @@ void ServoLoop::refuse_command(CommandKind k) noexcept {
 bool ServoLoop::try_reset() noexcept {
   bool gone = !fb_.heartbeat_lost && !fb_.bus_error && !(io_ != nullptr && io_->estop_tripped());
   for (int i = 0; i < axes_; ++i) gone = gone && !fb_.axis[static_cast<std::size_t>(i)].fault;
+  gone = gone && !fb_.spindle.fault;
   const Transition t = sm_.reset(gone);
   if (!t.accepted) return false;
   transition(t, FaultCause::kNone);
@@ -549,7 +552,44 @@ void ServoLoop::cycle() noexcept {
     if (ist == control::InterpStatus::kHolding && st == MachineState::kRunning) {
       transition(sm_.apply(Request::kHold), FaultCause::kNone);  // M0/M1/M6
     }
+    // A feed move after a spindle start / speed change (the planner's kSpindleSync marker): the
+    // path waits at its exact stop while the marker's speed is commanded (step 7) until the
+    // spindle is at speed, at most spindle.at_speed_timeout_s, then FAULT.
+    const bool was_waiting = spindle_waiting_;
+    spindle_waiting_ = false;
+    if (ist == control::InterpStatus::kSpindleWait && !stopping_) {
+      using Wait = config::SpindleConfig::Wait;
+      const Wait policy = cfg_.spindle.at_speed_wait;
+      const bool wait = spindle_present_ && (policy == Wait::kAlways ||
+                                             (policy == Wait::kForce && force_requested_));
+      if (!wait) {
+        job_->interp.resume();
+      } else if (st == MachineState::kRunning) {
+        if (!was_waiting) spindle_wait_cycles_ = 0;
+        spindle_waiting_ = true;
+        // Judged on the target of the marker (the ramp and the feedback of the previous cycle
+        // must both be there): at_speed_ of an older target does not count.
+        const double target = iout_.spindle == control::SpindleDir::kOff ? 0.0
+                              : drivers::clamp_spindle_rpm(
+                                    iout_.spindle == control::SpindleDir::kCcw ? -iout_.spindle_rpm
+                                                                               : iout_.spindle_rpm,
+                                    cfg_.spindle.limits);
+        if (spindle_at_speed_ && target == spindle_target_rpm_) {
+          spindle_waiting_ = false;
+          ++spindle_waits_;
+          spindle_last_wait_s_ = static_cast<double>(spindle_wait_cycles_) * period_s_;
+          job_->interp.resume();
+          emit(EventKind::kSpindleAtSpeed, FaultCause::kNone, -1, spindle_last_wait_s_,
+               fb_.spindle.actual_rpm);
+        } else if (static_cast<double>(++spindle_wait_cycles_) * period_s_ >
+                   cfg_.spindle.at_speed_timeout_s) {
+          spindle_waiting_ = false;
+          raise_fault(FaultCause::kSpindleNotAtSpeed, -1, fb_.spindle.actual_rpm, target);
+        }
+      }
+    }
     const bool stationary = iout_.override_applied <= 0.0 ||
+                            ist == control::InterpStatus::kSpindleWait ||
                             ist == control::InterpStatus::kHolding ||
                             ist == control::InterpStatus::kStarved ||
                             ist == control::InterpStatus::kDone;
@@ -646,7 +686,8 @@ void ServoLoop::cycle() noexcept {
 
   // 7. Force controller -> feed override (applied from the next interpolator step) and spindle.
   force_step(st);
-  out.spindle_rpm = out.mode == DriveMode::kEnabled ? spindle_rpm_cmd_ : 0.0;
+  spindle_step(out.mode);
+  out.spindle_rpm = out.mode == DriveMode::kEnabled ? spindle_out_rpm_ : 0.0;
   out_ = out;
 
   // 8. RPDOs.
@@ -672,6 +713,8 @@ void ServoLoop::cycle() noexcept {
         break;
       }
     }
+    if (fb_.spindle.fault && sm_.state() != MachineState::kFault)
+      raise_fault(FaultCause::kSpindleFault, -1, fb_.spindle.actual_rpm, 0.0);
     if (fb_.heartbeat_lost) raise_fault(FaultCause::kHeartbeatLost, fb_.heartbeat_lost_node, 1.0, 0.0);
     if (fb_.bus_error) raise_fault(FaultCause::kBusError, -1, 1.0, 0.0);
   }
@@ -751,7 +794,8 @@ void ServoLoop::force_step(MachineState st) noexcept {
     return;
   }
   const control::ForceLimits& lim = cfg_.force.limits;
-  const bool running = in_prog && st == MachineState::kRunning && !stopping_;
+  // Not while a feed move waits for the spindle: the path stands, the controller would wind up.
+  const bool running = in_prog && st == MachineState::kRunning && !stopping_ && !spindle_waiting_;
   // Planned progress (the position reference of the 2-DOF controller): a ramp at the design's
   // path speed k_v (force.plant.k_v_mm_s, speed at 100 % override) times the user's override.
   // The design assumes the program's feed equals k_v; another feed is a model gain error in the
@@ -810,6 +854,31 @@ void ServoLoop::force_step(MachineState st) noexcept {
   if (io_ != nullptr) io_->set_spindle_rpm(std::abs(spindle_rpm_cmd_));
 }
 
+void ServoLoop::spindle_step(DriveMode mode) noexcept {
+  if (!spindle_present_) {  // no spindle: the programmed speed is only information (filter, GPIO)
+    spindle_target_rpm_ = spindle_out_rpm_ = spindle_rpm_cmd_;
+    spindle_at_speed_ = false;
+    return;
+  }
+  const drivers::SpindleLimits& l = cfg_.spindle.limits;
+  spindle_target_rpm_ = drivers::clamp_spindle_rpm(spindle_rpm_cmd_, l);
+  if (mode == DriveMode::kEnabled) {
+    spindle_out_rpm_ = spindle_ramp_.step(spindle_target_rpm_, period_s_);
+  } else {
+    spindle_ramp_.reset(0.0);  // the drive is off: a restart ramps up from standstill
+    spindle_out_rpm_ = 0.0;
+  }
+  // At speed: the ramp has arrived and the spindle follows (with feedback), or the ramp alone
+  // (a spindle without speed feedback).
+  const bool ramp_done = spindle_out_rpm_ == spindle_target_rpm_;
+  if (fb_.spindle.present) {
+    spindle_at_speed_ = ramp_done && mode == DriveMode::kEnabled && fb_.spindle.enabled &&
+                        drivers::spindle_at_speed(fb_.spindle.actual_rpm, spindle_target_rpm_, l);
+  } else {
+    spindle_at_speed_ = ramp_done && mode == DriveMode::kEnabled;
+  }
+}
+
 void ServoLoop::publish() noexcept {
   const std::uint64_t s0 = seq_.load(std::memory_order_relaxed);
   seq_.store(s0 + 1, std::memory_order_relaxed);
@@ -860,8 +929,18 @@ void ServoLoop::publish() noexcept {
   pub_.force_fallback = force_fallback_;
   pub_.force_fallbacks = force_fallbacks_;
   pub_.spindle_rpm_cmd = out_.spindle_rpm;
+  pub_.spindle_present = spindle_present_;
+  pub_.spindle_feedback = fb_.spindle.present;
+  pub_.spindle_target_rpm = spindle_target_rpm_;
+  pub_.spindle_actual_rpm = fb_.spindle.actual_rpm;
+  pub_.spindle_at_speed = spindle_at_speed_;
+  pub_.spindle_waiting = spindle_waiting_;
+  pub_.spindle_waits = spindle_waits_;
+  pub_.spindle_last_wait_s = spindle_last_wait_s_;
   pub_.out_drive_enable = out_.mode == DriveMode::kEnabled && sm_.state() != MachineState::kEstop;
-  pub_.out_spindle_enable = out_.spindle_rpm != 0.0;
+  // On while a speed is requested (M3/M4 with S): M5 drops it at once, the drive decelerates
+  // (the rate-limited command ramps down with it).
+  pub_.out_spindle_enable = out_.mode == DriveMode::kEnabled && spindle_target_rpm_ != 0.0;
   const bool in_prog = job_ != nullptr;
   pub_.out_mist = in_prog && iout_.mist && sm_.state() != MachineState::kEstop;
   pub_.out_flood = in_prog && iout_.flood && sm_.state() != MachineState::kEstop;

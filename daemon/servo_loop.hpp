@@ -114,6 +114,7 @@ enum class EventKind : std::uint8_t {
   kForceCeiling,   // value: force N, limit: ceiling N
   kForceRecovered, // a valid sample again after a fallback (force control stays off until `force on`)
   kLimitsSwapped,
+  kSpindleAtSpeed, // a feed move waited for the spindle: value = wait s, limit = actual rpm
 };
 
 // Fixed-size event record (RT -> logger thread).
@@ -196,7 +197,16 @@ struct LoopStatus {
   double force_override = 1.0;      // override from the force controller (1 when off)
   bool force_fallback = false;      // stale/invalid fallback latched (until `force on`)
   std::uint64_t force_fallbacks = 0;
-  double spindle_rpm_cmd = 0.0;     // AxisCommands::spindle_rpm
+  double spindle_rpm_cmd = 0.0;     // AxisCommands::spindle_rpm (clamped, rate-limited)
+  // Spindle (spindle: section limits; bus feedback when the bus has a spindle).
+  bool spindle_present = false;     // a spindle is configured (spindle.type or bus.spindle)
+  bool spindle_feedback = false;    // its speed is fed back
+  double spindle_target_rpm = 0.0;  // requested (program / force controller), clamped
+  double spindle_actual_rpm = 0.0;
+  bool spindle_at_speed = false;
+  bool spindle_waiting = false;     // a feed move waits for at-speed
+  std::uint64_t spindle_waits = 0;  // feed moves that waited
+  double spindle_last_wait_s = 0.0; // how long the last wait took
   // Outputs for the GPIO lines (applied by the I/O supervisor) and the E-stop input.
   bool out_drive_enable = false;
   bool out_spindle_enable = false;
@@ -319,7 +329,18 @@ class ServoLoop {
   bool force_fallback_ = false;
   bool force_ok_prev_ = true;
   std::uint64_t force_fallbacks_ = 0;
-  double spindle_rpm_cmd_ = 0.0;
+  double spindle_rpm_cmd_ = 0.0;  // target before the limits
+  // Spindle: limits and ramp (issue 8), at-speed wait of feed moves (kSpindleSync markers).
+  void spindle_step(DriveMode mode) noexcept;
+  bool spindle_present_ = false;
+  drivers::SpindleRamp spindle_ramp_{drivers::SpindleLimits{}};
+  double spindle_target_rpm_ = 0.0;
+  double spindle_out_rpm_ = 0.0;
+  bool spindle_at_speed_ = false;
+  bool spindle_waiting_ = false;
+  std::int64_t spindle_wait_cycles_ = 0;
+  std::uint64_t spindle_waits_ = 0;
+  double spindle_last_wait_s_ = 0.0;
   bool estop_input_ = false;
   std::uint64_t accel_clamps_ = 0;
 

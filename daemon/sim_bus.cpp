@@ -43,6 +43,12 @@ void SimBus::begin_cycle() noexcept {
     drive_[a].step_velocity(v);
     latched_v_[a] = received_v_[a];
   }
+  if (spindle_tau_s_ > 0.0 && !spindle_stall_) {
+    const double target = mode_ == DriveMode::kEnabled ? spindle_latched_rpm_ : 0.0;
+    const double a = std::exp(-drive_[0].params().period_s / spindle_tau_s_);
+    spindle_rpm_ = a * spindle_rpm_ + (1.0 - a) * target;
+  }
+  spindle_latched_rpm_ = spindle_received_rpm_;
   mode_ = received_mode_;
   ++cycle_;
 }
@@ -76,6 +82,11 @@ void SimBus::read(BusFeedback& fb) noexcept {
     f.statusword = f.fault ? 0x0008 : (f.enabled ? 0x0027 : 0x0040);
   }
   if (can_cpm_[0] > 0.0) can_have_last_ = true;
+  fb.spindle.present = spindle_tau_s_ > 0.0;
+  fb.spindle.fresh = fb.spindle.present;
+  fb.spindle.actual_rpm = spindle_rpm_;
+  fb.spindle.enabled = fb.spindle.present && mode_ == DriveMode::kEnabled;
+  fb.spindle.fault = false;
 }
 
 void SimBus::write(const AxisCommands& cmd) noexcept {
@@ -87,6 +98,7 @@ void SimBus::write(const AxisCommands& cmd) noexcept {
                                        : cmd.velocity_mm_s[a];
   }
   received_mode_ = cmd.mode;
+  spindle_received_rpm_ = std::isfinite(cmd.spindle_rpm) ? cmd.spindle_rpm : 0.0;
 }
 
 bool SimBus::set_position(int axis, double position_mm) {
@@ -125,7 +137,15 @@ std::unique_ptr<SimBus> make_sim_bus(const config::Config& cfg) {
         velocity_mapped = velocity_mapped || e.index == 0x606C;
     }
   }
-  return std::make_unique<SimBus>(sim_bus_drives(cfg), cpm, velocity_mapped);
+  auto bus = std::make_unique<SimBus>(sim_bus_drives(cfg), cpm, velocity_mapped);
+  // The spindle: the built-in machine's (spindle.type sim), or, for an offline run of a CANopen
+  // config, the simulated spindle drive's lag when its speed (0x606C) is fed back.
+  bool can_spindle_feedback = false;
+  if (cfg.bus.type == "socketcan" && cfg.bus.spindle) {
+    for (const auto& e : cfg.bus.spindle->tpdo) can_spindle_feedback = can_spindle_feedback || e.index == 0x606C;
+  }
+  if (cfg.spindle.type == "sim" || can_spindle_feedback) bus->configure_spindle(cfg.spindle.sim_tau_s);
+  return bus;
 }
 
 }  // namespace contour::daemon

@@ -46,6 +46,10 @@ class SimBus final : public AxisBus {
   void inject_drive_disabled(int axis, bool on) noexcept {
     disabled_[static_cast<std::size_t>(axis)] = on;
   }
+  // Spindle model: first-order speed lag tau_s (0 = no spindle). Setup-time only.
+  void configure_spindle(double tau_s) noexcept { spindle_tau_s_ = tau_s; }
+  // The spindle is jammed / its drive does not follow (stays at its speed).
+  void inject_spindle_stall(bool on) noexcept { spindle_stall_ = on; }
   // The mode of the last write() (what the RPDOs of this cycle asked for).
   [[nodiscard]] DriveMode written_mode() const noexcept { return received_mode_; }
 
@@ -58,6 +62,11 @@ class SimBus final : public AxisBus {
   DriveMode received_mode_ = DriveMode::kDisabled;
   std::array<std::atomic<bool>, kMaxAxes> fault_{};
   std::array<std::atomic<bool>, kMaxAxes> disabled_{};
+  double spindle_tau_s_ = 0.0;
+  double spindle_rpm_ = 0.0;
+  double spindle_latched_rpm_ = 0.0;
+  double spindle_received_rpm_ = 0.0;
+  std::atomic<bool> spindle_stall_{false};
   std::uint64_t cycle_ = 0;
   std::array<double, kMaxAxes> can_cpm_{};  // 0 = ideal bus
   bool can_velocity_mapped_ = false;

@@ -218,6 +218,10 @@ Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstr
       interp.resume();
       continue;
     }
+    if (st == control::InterpStatus::kSpindleWait) {  // no spindle here: at speed at once
+      interp.resume();
+      continue;
+    }
     const Vector3d p = out.position_mm;
     // Geometry window around the current progress.
     const double s = out.path_progress_mm;

@@ -153,3 +153,59 @@ TEST(Interpolator, HoldsAtProgramStopUntilResumed) {
   while (ip.step(1.0, out) != InterpStatus::kDone) ASSERT_LT(++n, 100000);
   EXPECT_EQ(out.position_mm, Vector3d(5, 5, 0));
 }
+
+TEST(Interpolator, FeedMoveAfterASpindleChangeWaitsAtAnExactStopWithTheNewSpeedOut) {
+  // G0 X5 with the spindle starting (M3 S6000), G1 X10 (waits), G1 X15 S6000 (no wait),
+  // G1 X20 S8000 (speed change: waits), M5 G1 X25 (spindle off: no wait).
+  PlannerParams pp;
+  BlendPlanner pl(pp, Vector3d::Zero());
+  auto move = [&](int line, double x, bool rapid, SpindleDir dir, double rpm) {
+    Block b;
+    b.line = line;
+    b.rapid = rapid;
+    b.feed_mm_min = 1200;
+    b.seg = PathSegment::line(Vector3d(x - 5, 0, 0), Vector3d(x, 0, 0));
+    b.spindle = dir;
+    b.spindle_rpm = rpm;
+    pl.push(b);
+  };
+  move(1, 5, true, SpindleDir::kCw, 6000);
+  move(2, 10, false, SpindleDir::kCw, 6000);
+  move(3, 15, false, SpindleDir::kCw, 6000);
+  move(4, 20, false, SpindleDir::kCw, 8000);
+  move(5, 25, false, SpindleDir::kOff, 0);
+  Block e;
+  e.kind = BlockKind::kEnd;
+  pl.push(e);
+  Interpolator ip;
+  ip.configure(InterpolatorParams{}, Vector3d::Zero());
+  PlannedSegment s;
+  int markers = 0;
+  while (pl.pop(s)) {
+    markers += s.kind == SegmentKind::kSpindleSync ? 1 : 0;
+    ip.push(s);
+  }
+  EXPECT_EQ(markers, 2);
+  InterpOutput out;
+  std::vector<double> wait_x, wait_rpm;
+  for (int n = 0; n < 200000; ++n) {
+    const auto st = ip.step(1.0, out);
+    if (st == InterpStatus::kDone) break;
+    if (st != InterpStatus::kSpindleWait) continue;
+    wait_x.push_back(out.position_mm.x());
+    wait_rpm.push_back(out.spindle_rpm);
+    // Waits until resumed, standing still, the new speed already out.
+    for (int i = 0; i < 50; ++i) {
+      ASSERT_EQ(ip.step(1.0, out), InterpStatus::kSpindleWait);
+      EXPECT_EQ(out.position_mm.x(), wait_x.back());
+      EXPECT_EQ(out.spindle, SpindleDir::kCw);
+    }
+    ip.resume();
+  }
+  EXPECT_EQ(out.position_mm, Vector3d(25, 0, 0));
+  ASSERT_EQ(wait_x.size(), 2u);
+  EXPECT_EQ(wait_x[0], 5.0);  // exact stop at the end of the rapid
+  EXPECT_EQ(wait_rpm[0], 6000.0);
+  EXPECT_EQ(wait_x[1], 15.0);
+  EXPECT_EQ(wait_rpm[1], 8000.0);
+}
