@@ -7,6 +7,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -71,6 +72,19 @@ void DynamometerServer::set_fault(FaultMode mode, std::chrono::milliseconds dela
   fault_ = mode;
   delay_ = delay;
   exception_code_ = exception_code;
+}
+void DynamometerServer::inject_no_reply(std::chrono::milliseconds d) {
+  std::lock_guard lk(mu_);
+  no_reply_until_ = std::chrono::steady_clock::now() + d;
+}
+void DynamometerServer::inject_exceptions(int count, int code) {
+  std::lock_guard lk(mu_);
+  exceptions_left_ = std::max(0, count);
+  injected_exception_code_ = code;
+}
+void DynamometerServer::inject_disconnect() {
+  std::lock_guard lk(mu_);
+  disconnect_pending_ = true;
 }
 std::array<double, dm::kForceChannels> DynamometerServer::last_forces() const {
   std::lock_guard lk(mu_);
@@ -195,6 +209,16 @@ void DynamometerServer::run(int listen_fd) {
         fault = fault_;
         delay = delay_;
         exc = exception_code_;
+        if (std::chrono::steady_clock::now() < no_reply_until_) {
+          fault = FaultMode::kNoReply;
+        } else if (disconnect_pending_) {
+          disconnect_pending_ = false;
+          fault = FaultMode::kDropConnection;
+        } else if (exceptions_left_ > 0) {
+          --exceptions_left_;
+          fault = FaultMode::kException;
+          exc = injected_exception_code_;
+        }
       }
       if (fault == FaultMode::kNoReply) continue;
       if (fault == FaultMode::kDropConnection) {

@@ -7,7 +7,9 @@
 // setters: swapped words in Debian's 3.1.6).
 //
 // Thread-safety: setters may be called from any thread; the model is evaluated at each request,
-// on the server thread. Fault injection: no reply, delayed reply, exception reply, connection drop.
+// on the server thread. Fault injection: no reply, delayed reply, exception reply, connection drop
+// (set_fault: until changed), and one-shot faults on top of it (inject_*: contour-machine-sim
+// --storm), which take precedence while active.
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -70,6 +72,14 @@ class DynamometerServer {
 
   void set_fault(FaultMode mode, std::chrono::milliseconds delay = std::chrono::milliseconds(0),
                  int exception_code = 4);
+  // One-shot faults (any thread). No reply to any request for `d` of wall time from now (the
+  // requests are read and dropped); an exception reply (`code`, 4 = server device failure) to
+  // each of the next `count` requests; closing the connection that carries the next request,
+  // without a reply. A no-reply window defers the other two; a pending disconnect goes before
+  // pending exceptions.
+  void inject_no_reply(std::chrono::milliseconds d);
+  void inject_exceptions(int count, int code = 4);
+  void inject_disconnect();
   [[nodiscard]] std::uint64_t requests() const noexcept { return requests_.load(); }
   // Last forces served (N), per channel.
   [[nodiscard]] std::array<double, drivers::modbus::kForceChannels> last_forces() const;
@@ -102,6 +112,10 @@ class DynamometerServer {
   FaultMode fault_ = FaultMode::kNone;
   std::chrono::milliseconds delay_{0};
   int exception_code_ = 4;
+  std::chrono::steady_clock::time_point no_reply_until_{};
+  int exceptions_left_ = 0;
+  int injected_exception_code_ = 4;
+  bool disconnect_pending_ = false;
   std::array<double, drivers::modbus::kForceChannels> last_{};
   std::mt19937 rng_;
   std::vector<std::uint16_t> regs_;  // shadow of the served table

@@ -1,11 +1,17 @@
 // contour-machine-sim --config FILE --can IFACE [--modbus HOST:PORT] [fault flags]
+//                     [--storm SEED [--storm-interval SYNCS] [--storm-kinds LIST]]
 // The simulated machine for HIL: one process answering every bus node of the config (axes from
 // machine.axes[].node_id, the spindle from bus.spindle.node_id) as CiA 402 drives on SocketCAN,
 // advancing one plant step per SYNC (lockstep). Prints "ready: ..." on stdout once listening and a
 // JSON summary as its last line on SIGINT/SIGTERM.
+// --storm SEED: seeded random fault injection scheduled in SYNC counts (storm.hpp: kinds, gating,
+// schedule); each injected event is one JSON line on stdout ({"storm":KIND,...}, flushed at
+// once), and the summary gains "storm": {seed, events per kind, tpdo_dropped, emcy_sent}.
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -19,6 +25,7 @@
 #include "drivers/can/socket_can.hpp"
 #include "tools/contour-machine-sim/dynamometer_server.hpp"
 #include "tools/contour-machine-sim/sim_drive.hpp"
+#include "tools/contour-machine-sim/storm.hpp"
 
 namespace {
 
@@ -67,6 +74,42 @@ int main(int argc, char** argv) {
   app.add_option("--sdo-abort", sdo_abort, "NODE:INDEX:SUB[:CODE] answer this object with an abort");
   app.add_option("--drop-sdo", drop_sdo, "NODE:COUNT ignore the node's first COUNT SDO requests");
   app.add_option("--malformed", malformed, "NODE:SYNC send malformed frames at this SYNC");
+  std::uint64_t storm_seed = 0;
+  long storm_interval = 5000;
+  std::string storm_kinds;
+  auto* storm_opt = app.add_option(
+      "--storm", storm_seed,
+      "SEED: random fault storm (std::mt19937_64), scheduled in SYNCs; same seed + same master "
+      "= same events");
+  app.add_option("--storm-interval", storm_interval,
+                 "SYNCS mean gap between storm events, each gap uniform in [0.5, 1.5] x SYNCS "
+                 "(default 5000)")
+      ->check(CLI::Range(1L, 1000000000L))
+      ->needs(storm_opt);
+  app.add_option("--storm-kinds", storm_kinds,
+                 "LIST comma list of storm kinds (default: all; modbus_* only with the "
+                 "dynamometer server)")
+      ->needs(storm_opt);
+  app.footer(
+      "Storm kinds (--storm-kinds):\n"
+      "  tpdo_gap          an axis node withholds 1..(safety.missed_tpdo_streak - 1)\n"
+      "                    TPDOs in a row: counted as missed, below the fault threshold\n"
+      "  tpdo_burst        an axis node withholds missed_tpdo_streak + 2 TPDOs: fault\n"
+      "  drive_fault       an axis node raises a drive fault (Fault + EMCY 0x2310,\n"
+      "                    0x3210, 0x4310, 0x7121 or 0x8611); the master's fault reset\n"
+      "                    (controlword bit 7 edge) clears it\n"
+      "  heartbeat_gap     a node sends no heartbeat for 2 x its bus heartbeat_timeout_ms\n"
+      "  modbus_timeout    dynamometer: no reply for 5 x the reader's response timeout\n"
+      "  modbus_exception  dynamometer: exception replies (code 4) to the next 3 requests\n"
+      "  modbus_disconnect dynamometer: closes the connection of the next request\n"
+      "tpdo_burst, drive_fault and heartbeat_gap are fault-level: one fires only after\n"
+      "every axis node has been operation enabled for 500 SYNCs in a row (postponed until\n"
+      "then, same kind). Events never overlap; none comes within 50 SYNCs of a fault-level\n"
+      "one. Each fired event is one JSON line on stdout, e.g.\n"
+      "  {\"storm\":\"tpdo_gap\",\"node\":1,\"sync\":4711,\"count\":2}\n"
+      "(sync = SYNC frames received since start). The summary gains \"storm\": {\"seed\",\n"
+      "\"events\": {kind: n}, \"tpdo_dropped\": TPDOs withheld (storm and --drop-tpdo),\n"
+      "\"emcy_sent\": EMCYs of drive_fault events, incl. the error-reset EMCY after the reset}.");
   CLI11_PARSE(app, argc, argv);
 
   contour::config::Config cfg;
@@ -109,6 +152,30 @@ int main(int argc, char** argv) {
     } catch (const std::exception& e) {
       std::cerr << "contour-machine-sim: dynamometer: " << e.what() << "\n";
       return 69;
+    }
+  }
+
+  // Storm kinds, checked before the bus is opened.
+  std::vector<contour::sim::StormKind> storm_kind_list;
+  if (*storm_opt) {
+    if (storm_kinds.empty()) {
+      // Default: every kind this machine can take (modbus_* need the dynamometer server).
+      for (auto k : contour::sim::all_storm_kinds())
+        if (dyno || !contour::sim::storm_needs_modbus(k)) storm_kind_list.push_back(k);
+    } else {
+      try {
+        storm_kind_list = contour::sim::parse_storm_kinds(storm_kinds);
+      } catch (const std::invalid_argument& e) {
+        std::cerr << "contour-machine-sim: --storm-kinds: " << e.what() << "\n";
+        return 2;
+      }
+      for (auto k : storm_kind_list) {
+        if (!dyno && contour::sim::storm_needs_modbus(k)) {
+          std::cerr << "contour-machine-sim: --storm-kinds: " << contour::sim::storm_kind_name(k)
+                    << " needs the dynamometer server (dynamometer: in the config, or --modbus)\n";
+          return 2;
+        }
+      }
     }
   }
 
@@ -210,6 +277,35 @@ int main(int argc, char** argv) {
   std::vector<std::unique_ptr<contour::sim::SimDrive>> drives;
   for (const auto& s : setups) drives.push_back(std::make_unique<contour::sim::SimDrive>(s, send));
 
+  std::unique_ptr<contour::sim::Storm> storm;
+  if (*storm_opt) {
+    contour::sim::StormSetup ss;
+    ss.seed = storm_seed;
+    ss.interval_syncs = storm_interval;
+    ss.missed_tpdo_streak = cfg.safety.missed_tpdo_streak;
+    ss.period_s = cfg.machine.period_s;
+    const auto reader_timeout = std::chrono::duration_cast<std::chrono::milliseconds>(
+        cfg.dynamometer.reader.transport.response_timeout);
+    ss.modbus_no_reply = 5 * std::max(std::chrono::milliseconds(1), reader_timeout);
+    std::vector<contour::sim::StormNode> sn;
+    for (std::size_t i = 0; i < drives.size(); ++i) {
+      contour::sim::StormNode n;
+      n.drive = drives[i].get();
+      n.axis = !setups[i].spindle;
+      n.heartbeat_timeout_ms = nodes[i].heartbeat_ms > 0 ? nodes[i].heartbeat_timeout_ms : 0;
+      n.sync_every = std::max(1, nodes[i].sync_every);
+      sn.push_back(n);
+    }
+    ss.kinds = storm_kind_list;
+    try {
+      storm = std::make_unique<contour::sim::Storm>(
+          ss, sn, dyno.get(), [](const std::string& line) { std::cout << line << std::endl; });
+    } catch (const std::invalid_argument& e) {
+      std::cerr << "contour-machine-sim: --storm: " << e.what() << "\n";
+      return 2;
+    }
+  }
+
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
   for (auto& d : drives) d->power_on();
@@ -225,6 +321,8 @@ int main(int argc, char** argv) {
     const std::int64_t now = mono_ns();
     while (bus->receive(f)) {
       ++rx_frames;
+      if (storm && f.id == contour::drivers::canopen::kCobSync && !f.error && !f.rtr && !f.extended)
+        storm->on_sync();  // before the drives step: an event acts on this SYNC
       for (auto& d : drives) {
         d->tick_wall(now);
         d->on_frame(f);
@@ -261,6 +359,7 @@ int main(int argc, char** argv) {
     n["state"] = contour::drivers::canopen::cia402_state_name(d->state());
     j["nodes"].push_back(n);
   }
+  if (storm) j["storm"] = storm->summary();
   std::cout << j.dump() << std::endl;
   return 0;
 }

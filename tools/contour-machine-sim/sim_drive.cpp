@@ -120,6 +120,8 @@ void SimDrive::power_on() {
   od_ = od_defaults_;
   state_ = co::Cia402State::kSwitchOnDisabled;
   set_int(0x6041, 0, co::statusword_for(state_));
+  injected_fault_.reset();
+  injected_fault_latched_ = false;  // an application reset clears the fault without an EMCY
   reset_communication();
 }
 
@@ -131,11 +133,14 @@ void SimDrive::reset_communication() {
   syncs_ = 0;
   rx_latched_ = false;
   seg_upload_ = seg_download_ = false;
+  storm_drop_left_ = 0;  // a rebooted communication layer forgets injected PDO/heartbeat gaps
+  hb_gap_left_ = 0;
   send_(co::heartbeat_frame(s_.node_id, co::NmtState::kBootUp));
 }
 
 void SimDrive::heartbeat() {
   if (s_.faults.stop_heartbeat_at >= 0 && syncs_ >= s_.faults.stop_heartbeat_at) return;
+  if (hb_gap_left_ > 0) return;
   send_(co::heartbeat_frame(s_.node_id, nmt_));
 }
 
@@ -300,8 +305,18 @@ void SimDrive::on_sync() {
   const bool tx_valid = (u32(0x1800, 1) & 0x80000000u) == 0;
   const bool dropping = fl.drop_tpdo_from >= 0 && syncs_ >= fl.drop_tpdo_from &&
                         (fl.drop_tpdo_count == 0 || syncs_ < fl.drop_tpdo_from + fl.drop_tpdo_count);
-  if (operational && tx_valid && tx_type >= 1 && tx_type <= 240 && syncs_ % tx_type == 0 &&
-      !dropping) {
+  const bool tx_due =
+      operational && tx_valid && tx_type >= 1 && tx_type <= 240 && syncs_ % tx_type == 0;
+  // Only a TPDO that was due counts as dropped: that is exactly one missed TPDO for the master.
+  bool withheld = false;
+  if (tx_due && dropping) {
+    withheld = true;
+  } else if (tx_due && storm_drop_left_ > 0) {
+    --storm_drop_left_;
+    withheld = true;
+  }
+  if (withheld) ++tpdo_dropped_;
+  if (tx_due && !withheld) {
     const auto m = mapping(false);
     co::PdoValues v{};
     for (std::size_t k = 0; k < m.count; ++k) v[k] = read_int(m.entries[k].index, m.entries[k].sub);
@@ -334,8 +349,17 @@ void SimDrive::on_sync() {
     const long every = std::max<long>(1, std::lround(static_cast<double>(hb_ms) * 1e-3 / s_.period_s));
     if (syncs_ % every == 0) heartbeat();
   }
+  if (hb_gap_left_ > 0) --hb_gap_left_;  // counted in SYNCs: the gap pauses when SYNC stops
   // 3. apply the RPDO latched since the previous SYNC
   if (fl.fault_at >= 0 && syncs_ == fl.fault_at && state_ != co::Cia402State::kFault) raise_fault(fl.fault_code);
+  if (injected_fault_) {
+    if (state_ != co::Cia402State::kFault && state_ != co::Cia402State::kFaultReactionActive) {
+      raise_fault(*injected_fault_);
+      injected_fault_latched_ = true;
+      ++injected_emcy_sent_;
+    }
+    injected_fault_.reset();
+  }
   if (motion_started_at_ < 0 && state_ == co::Cia402State::kOperationEnabled && rx_latched_ &&
       rx_target_ != 0)
     motion_started_at_ = syncs_;
@@ -358,6 +382,8 @@ void SimDrive::on_sync() {
     set_int(0x603F, 0, 0);
     set_int(0x1001, 0, 0);
     send_(co::emcy_frame(s_.node_id, co::Emcy{}));  // error reset
+    if (injected_fault_latched_) ++injected_emcy_sent_;
+    injected_fault_latched_ = false;
   }
   // 4. step the plant one period
   const std::int8_t mode = static_cast<std::int8_t>(read_int(0x6061, 0));

@@ -15,6 +15,7 @@
 // since SYNC n-1 and steps the plant. The CAN transport therefore contributes one period of
 // command delay; the FeedDrive inside gets (configured delay_cycles - 1) so that the whole loop
 // has the configured delay, as contour-sim's in-process drive does.
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -78,6 +79,23 @@ class SimDrive {
   [[nodiscard]] bool is_spindle() const { return s_.spindle; }
   [[nodiscard]] long syncs() const { return syncs_; }
 
+  // Re-armable fault injection (contour-machine-sim --storm, storm.hpp). Each call is one event
+  // and may be repeated any time after the previous one; all act on SYNC (lockstep).
+  // Withhold the next `count` TPDOs this node would transmit (counted in TPDOs, not SYNCs).
+  void drop_tpdos(long count) { storm_drop_left_ += std::max(0L, count); }
+  // Raise a drive fault (statusword Fault reaction active -> Fault, EMCY `code`) at the next
+  // SYNC, where --fault raises its one-shot fault. Ignored if the drive is in Fault by then.
+  // The operator's fault reset (controlword bit 7 edge) clears it as any other fault.
+  void inject_fault(std::uint16_t code) { injected_fault_ = code; }
+  // Send no heartbeat (lockstep or wall-clock) for the next `syncs` SYNCs.
+  void suppress_heartbeat(long syncs) { hb_gap_left_ = std::max(hb_gap_left_, syncs); }
+  // TPDO frames withheld so far (--drop-tpdo and drop_tpdos) while the TPDO was due: NMT
+  // operational, PDO valid, transmission type's SYNC. Each is one missed TPDO for the master.
+  [[nodiscard]] std::uint64_t tpdo_dropped() const { return tpdo_dropped_; }
+  // EMCY frames caused by inject_fault(): the fault EMCY and, once the operator's reset clears
+  // that fault, the error-reset EMCY (code 0x0000).
+  [[nodiscard]] std::uint64_t injected_emcy_sent() const { return injected_emcy_sent_; }
+
  private:
   struct Entry {
     std::vector<std::uint8_t> value;
@@ -120,6 +138,13 @@ class SimDrive {
   long syncs_ = 0;
   long motion_started_at_ = -1;  // SYNC count of the first non-zero target applied
   long sdo_dropped_ = 0;         // SDO requests ignored so far (SimFaults::drop_sdo_requests)
+  // Re-armable injection (drop_tpdos, inject_fault, suppress_heartbeat).
+  long storm_drop_left_ = 0;
+  std::optional<std::uint16_t> injected_fault_;
+  bool injected_fault_latched_ = false;  // the drive's current fault came from inject_fault()
+  long hb_gap_left_ = 0;
+  std::uint64_t tpdo_dropped_ = 0;
+  std::uint64_t injected_emcy_sent_ = 0;
   std::int64_t last_hb_ns_ = 0;
   std::int64_t last_sync_wall_ns_ = 0;
   std::int64_t now_wall_ns_ = 0;
