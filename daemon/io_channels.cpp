@@ -14,6 +14,11 @@ IoChannels::IoChannels(const config::Config& cfg, std::function<void(const std::
   if (cfg_.dynamometer.enabled) {
     reader_ = std::make_unique<dm::DynamometerReader>(cfg_.dynamometer.reader);
   }
+  if (cfg_.spindle.type == "modbus_vfd") {
+    auto v = cfg_.spindle.vfd;
+    v.limits = cfg_.spindle.limits;
+    vfd_ = std::make_unique<dm::VfdSpindle>(v);
+  }
   if (cfg_.gpio.enabled) {
     dg::GpioBackend* backend = nullptr;
     if (cfg_.gpio.backend == "sim") {
@@ -37,6 +42,7 @@ void IoChannels::start(std::function<IoOutputs()> outputs, std::chrono::millisec
   if (started_) return;
   started_ = true;
   if (reader_) reader_->start();
+  if (vfd_) vfd_->start();
   if (io_) io_->start();
   {
     std::lock_guard lk(mu_);
@@ -52,6 +58,11 @@ void IoChannels::start(std::function<IoOutputs()> outputs, std::chrono::millisec
            (t.transport == dm::Transport::kTcp ? t.host + ":" + std::to_string(t.port) : t.device) +
            " at " + std::to_string(cfg_.dynamometer.reader.poll_rate_hz) + " Hz");
     }
+    if (vfd_) {
+      const auto& t = cfg_.spindle.vfd.transport;
+      log_("spindle: VFD over Modbus " +
+           (t.transport == dm::Transport::kTcp ? t.host + ":" + std::to_string(t.port) : t.device));
+    }
     if (io_)
       log_("gpio: backend " + cfg_.gpio.backend + ", E-stop " + cfg_.gpio.lines.estop.describe());
   }
@@ -65,6 +76,7 @@ void IoChannels::stop() {
   cv_.notify_all();
   if (thread_.joinable()) thread_.join();
   if (reader_) reader_->stop();
+  if (vfd_) vfd_->shutdown();  // run/stop register to stop, best effort
   if (io_) {
     io_->stop();
     // Safe state: enables and coolant off (MachineIo's destructor does it again).
@@ -85,6 +97,14 @@ bool IoChannels::estop_tripped() const noexcept { return io_ != nullptr && io_->
 
 void IoChannels::set_spindle_rpm(double rpm) noexcept {
   if (reader_) reader_->set_spindle_rpm(rpm);
+}
+
+void IoChannels::command_spindle(double rpm) noexcept {
+  if (vfd_) vfd_->set_speed(rpm);
+}
+
+drivers::SpindleStatus IoChannels::spindle_status() const noexcept {
+  return vfd_ ? vfd_->status() : drivers::SpindleStatus{};
 }
 
 bool IoChannels::reset_estop() {

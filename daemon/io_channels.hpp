@@ -29,6 +29,8 @@
 #include "drivers/gpio/machine_io.hpp"
 #include "drivers/gpio/sim_gpio.hpp"
 #include "drivers/modbus/dynamometer_reader.hpp"
+#include "drivers/modbus/vfd_spindle.hpp"
+#include "drivers/spindle.hpp"
 
 namespace contour::daemon {
 
@@ -45,6 +47,11 @@ class RtIo {
   [[nodiscard]] virtual bool estop_tripped() const noexcept = 0;
   // Spindle speed for the force filter's tooth period (wait-free atomic store).
   virtual void set_spindle_rpm(double rpm) noexcept = 0;
+  // A spindle outside the axis bus (spindle.type modbus_vfd): the loop's rate-limited signed
+  // command (atomic store) and its status (atomic loads). Default: none.
+  [[nodiscard]] virtual bool has_spindle() const noexcept { return false; }
+  virtual void command_spindle(double /*rpm*/) noexcept {}
+  [[nodiscard]] virtual drivers::SpindleStatus spindle_status() const noexcept { return {}; }
 };
 
 // Outputs requested by the loop (read from its published status by the supervisor thread).
@@ -76,6 +83,9 @@ class IoChannels final : public RtIo {
   drivers::modbus::ForceReading read_force() noexcept override;
   [[nodiscard]] bool estop_tripped() const noexcept override;
   void set_spindle_rpm(double rpm) noexcept override;
+  [[nodiscard]] bool has_spindle() const noexcept override { return vfd_ != nullptr; }
+  void command_spindle(double rpm) noexcept override;
+  [[nodiscard]] drivers::SpindleStatus spindle_status() const noexcept override;
 
   // Non-RT.
   [[nodiscard]] bool has_gpio() const noexcept { return io_ != nullptr; }
@@ -100,6 +110,7 @@ class IoChannels final : public RtIo {
   config::Config cfg_;
   std::function<void(const std::string&)> log_;
   std::unique_ptr<drivers::modbus::DynamometerReader> reader_;
+  std::unique_ptr<drivers::modbus::VfdSpindle> vfd_;  // spindle.type modbus_vfd
   std::shared_ptr<drivers::gpio::SimGpio> sim_;
   std::unique_ptr<drivers::gpio::GpioBackend> gpiod_;
   std::unique_ptr<drivers::gpio::MachineIo> io_;

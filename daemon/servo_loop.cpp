@@ -868,6 +868,17 @@ void ServoLoop::spindle_step(DriveMode mode) noexcept {
     spindle_ramp_.reset(0.0);  // the drive is off: a restart ramps up from standstill
     spindle_out_rpm_ = 0.0;
   }
+  // A VFD spindle (RtIo): it gets the same rate-limited command and reports its speed; the loop
+  // judges at-speed on the same rule as for a bus spindle.
+  if (io_ != nullptr && io_->has_spindle()) {
+    io_->command_spindle(spindle_out_rpm_);
+    const drivers::SpindleStatus s = io_->spindle_status();
+    fb_.spindle.present = true;
+    fb_.spindle.fresh = s.comm_ok;
+    fb_.spindle.actual_rpm = s.actual_rpm;
+    fb_.spindle.enabled = s.comm_ok;
+    fb_.spindle.fault = s.fault == drivers::SpindleFault::kDrive;
+  }
   // At speed: the ramp has arrived and the spindle follows (with feedback), or the ramp alone
   // (a spindle without speed feedback).
   const bool ramp_done = spindle_out_rpm_ == spindle_target_rpm_;

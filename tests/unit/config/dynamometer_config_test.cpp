@@ -4,11 +4,15 @@
 
 #include <gtest/gtest.h>
 
+#include <fstream>
+#include <iterator>
+
 #include <cstdio>
 #include <string>
 
 #include "config/gpio_config.hpp"
 #include "config/spindle_config.hpp"
+#include "tests/support/config_errors.hpp"
 
 namespace cc = contour::config;
 namespace dm = contour::drivers::modbus;
@@ -151,6 +155,40 @@ TEST(SpindleConfig, VfdExampleAndErrors) {
                                             cc::parse_spindle, err);
   EXPECT_TRUE(err.empty()) << joined(err);
   EXPECT_EQ(can.node_id, 5);
+}
+
+TEST(SpindleConfig, AtSpeedWaitSimTypeAndCrossChecksWithTheBus) {
+  std::vector<std::string> err;
+  const auto c = parse<cc::SpindleConfig>(
+      "spindle:\n  type: sim\n  sim_tau_s: 0.5\n  at_speed_wait: force\n", "spindle",
+      cc::parse_spindle, err);
+  EXPECT_TRUE(err.empty()) << joined(err);
+  EXPECT_EQ(c.at_speed_wait, cc::SpindleConfig::Wait::kForce);
+  EXPECT_DOUBLE_EQ(c.sim_tau_s, 0.5);
+  (void)parse<cc::SpindleConfig>("spindle:\n  at_speed_wait: sometimes\n  sim_tau_s: 0\n",
+                                 "spindle", cc::parse_spindle, err);
+  EXPECT_TRUE(has_error(err, "spindle.at_speed_wait")) << joined(err);
+  EXPECT_TRUE(has_error(err, "spindle.sim_tau_s")) << joined(err);
+  // Whole-file checks: a canopen spindle is the bus' spindle node; sim only on the sim bus.
+  using contour::test::any_contains;
+  using contour::test::config_errors;
+  const std::string root = std::string(CONTOUR_SOURCE_DIR) + "/config/";
+  auto with = [](const std::string& file, const std::string& from, const std::string& to) {
+    std::ifstream in(file);
+    std::string t((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const auto at = t.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) t.replace(at, from.size(), to);
+    return t;
+  };
+  auto e = config_errors(with(root + "hil.yaml", "  type: canopen\n  node_id: 4", "  type: canopen\n  node_id: 5"));
+  EXPECT_TRUE(any_contains(e, "spindle.node_id")) << (e.empty() ? "" : e[0]);
+  EXPECT_TRUE(any_contains(e, "bus.spindle.node_id (4)")) << (e.empty() ? "" : e[0]);
+  e = config_errors(with(root + "hil.yaml", "  type: canopen\n  node_id: 4", "  type: sim"));
+  EXPECT_TRUE(any_contains(e, "spindle.type")) << (e.empty() ? "" : e[0]);
+  e = config_errors(with(root + "sim.yaml", "  type: sim\n", "  type: canopen\n  node_id: 4\n"));
+  EXPECT_TRUE(any_contains(e, "bus.spindle")) << (e.empty() ? "" : e[0]);
+  EXPECT_TRUE(config_errors(with(root + "sim.yaml", "x", "x")).empty());
 }
 
 TEST(GpioConfig, LinesByOffsetAndNameAndErrors) {

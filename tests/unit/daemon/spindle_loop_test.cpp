@@ -6,8 +6,13 @@
 
 #include <cmath>
 
+#include <chrono>
+#include <thread>
+
 #include "config/config.hpp"
+#include "daemon/io_channels.hpp"
 #include "daemon/servo_loop.hpp"
+#include "tests/support/sim_vfd.hpp"
 #include "tests/unit/daemon/loop_rig.hpp"
 
 namespace contour::daemon {
@@ -168,6 +173,63 @@ TEST(SpindleLoop, SpeedIsClampedToTheLimitsAndRateLimited) {
   EXPECT_EQ(neg, -3000.0);        // M4: negative
   EXPECT_LE(max_step, 6000.0 * 0.001 + 1e-9);  // rate_rpm_s per 1 ms cycle, also through 0
   EXPECT_EQ(r.loop.status().spindle_waits, 3u);
+}
+
+TEST(SpindleLoop, VfdSpindleOverModbusGetsTheCommandAndGatesTheFeed) {
+  // spindle.type modbus_vfd: the loop's rate-limited command goes to the VFD thread (IoChannels),
+  // the VFD's actual-speed register gates the feed move; a stalled VFD faults at the timeout.
+  contour::test::SimVfd vfd;
+  auto cfg = spindle_config();
+  cfg.spindle.type = "modbus_vfd";
+  cfg.spindle.at_speed_timeout_s = 2.0;
+  auto& v = cfg.spindle.vfd;
+  v.transport.transport = drivers::modbus::Transport::kTcp;
+  v.transport.host = "127.0.0.1";
+  v.transport.port = vfd.port();
+  v.setpoint_register = 0;
+  v.run_address = 1;
+  v.actual_register = 2;
+  v.setpoint_counts_per_rpm = 0.5;
+  v.actual_counts_per_rpm = 0.5;
+  v.update_rate_hz = 100;
+  IoChannels io(cfg);
+  io.start({});
+  Rig r(cfg, &io);  // no SimBus spindle: the only speed feedback is the VFD's register
+  ASSERT_TRUE(r.enable());
+  r.load("G21 G90\nM3 S3000\nG01 X5 F600\nM2\n", 1);
+  r.loop.post({CommandKind::kRun});
+  int motion = -1;
+  double vfd_rpm_at_motion = 0.0;
+  for (int k = 0; k < 20000 && r.loop.status().finished_job != 1; ++k) {
+    r.step();
+    const auto st = r.loop.status();
+    if (motion < 0 && st.ref_mm[0] != 0.0) {
+      motion = k;
+      vfd_rpm_at_motion = vfd.setpoint.load() / 0.5;
+      EXPECT_GE(st.spindle_actual_rpm, 3000.0 - 60.0);
+    }
+    std::this_thread::sleep_for(std::chrono::microseconds(500));  // the VFD thread runs on wall time
+  }
+  const auto st = r.loop.status();
+  EXPECT_TRUE(st.finished_ok) << to_string(st.state) << " " << to_string(st.cause);
+  EXPECT_GT(motion, 0);
+  // The VFD register (its own ramp, polled at 100 Hz) within the at-speed band of 3000 rpm.
+  EXPECT_GE(vfd_rpm_at_motion, 3000.0 - 60.0);
+  EXPECT_EQ(vfd.run_cmd.load(), 1);      // forward
+  EXPECT_EQ(st.spindle_waits, 1u);
+  EXPECT_TRUE(st.spindle_feedback);
+  // Stalled: the next feed move after a speed change times out.
+  vfd.stall = true;
+  r.load("G21 G90\nM3 S4000\nG01 X0 F600\nM2\n", 2);
+  r.loop.post({CommandKind::kRun});
+  for (int k = 0; k < 4000 && r.loop.status().state != MachineState::kFault; ++k) {
+    r.step();
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  EXPECT_EQ(r.loop.status().state, MachineState::kFault);
+  EXPECT_EQ(r.loop.status().cause, FaultCause::kSpindleNotAtSpeed);
+  io.stop();
+  EXPECT_EQ(vfd.run_cmd.load(), 0);  // shutdown stops the spindle
 }
 
 }  // namespace
