@@ -19,6 +19,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -212,4 +213,43 @@ TEST(DaemonCanopen, HeartbeatLossOfOneNodeIsAFaultNamingTheNode) {
   EXPECT_NE(log.find("node 3 (Z): heartbeat lost (no heartbeat for 200 ms)"), std::string::npos)
       << log;
   EXPECT_EQ(d.terminate_and_wait(SIGTERM), 0) << d.log();
+}
+
+TEST(DaemonCanopen, FeedMoveWaitsForTheCanSpindleAtSpeed) {
+  // M3 S3000: the spindle node (4, velocity fed back in 0x606C every 10th SYNC) ramps at
+  // spindle.rate_rpm_s (6000 rpm/s) and follows with the simulated drive's lag (sim_tau_s 0.2 s);
+  // the G01 starts only when the reported speed is within max(50 rpm, 2 %) of 3000 rpm.
+  const auto cfg = contour::config::load_config_file(kHil);
+  ASSERT_EQ(cfg.spindle.type, "canopen");
+  contour::test::MachineSim sim;
+  ASSERT_TRUE(sim.ready()) << sim.stop();
+  Daemon d("spindle");
+  ASSERT_TRUE(d.connected()) << d.log();
+  ASSERT_EQ(d.state(), "READY") << d.log();
+  d.ok({{"cmd", "load"}, {"program", "G21 G90\nM3 S3000\nG01 X5 F600\nM5\nM2\n"}});
+  const auto job = d.ok({{"cmd", "run"}})["job"].get<std::uint64_t>();
+  // While waiting: RUNNING, the path at its start, the spindle accelerating.
+  const json w = d.wait_status([](const json& s) { return s["spindle"]["waiting"].get<bool>(); });
+  EXPECT_TRUE(w["spindle"]["waiting"].get<bool>()) << w.dump();
+  EXPECT_EQ(w["state"], "RUNNING");
+  EXPECT_EQ(w["ref_mm"][0].get<double>(), 0.0);
+  EXPECT_LT(w["spindle"]["actual_rpm"].get<double>(), 3000.0 - 60.0);
+  const json res = d.wait_finished(job);
+  EXPECT_TRUE(res["completed"].get<bool>()) << res.dump() << "\n" << d.log();
+  const json st = d.ok({{"cmd", "status"}});
+  const double wait_s = st["spindle"]["last_wait_s"].get<double>();
+  // Closed form as in the unit test: ramp Tr = 0.5 s, lag at its end R tau (1 - e^(-Tr/tau)),
+  // decaying with tau to the 60 rpm band. The CAN spindle's RPDO/TPDO every 10th SYNC adds up to
+  // ~2 x 10 ms.
+  const double tau = 0.2, R = 6000.0, Tr = 0.5;
+  const double expected_s = Tr + tau * std::log(R * tau * (1.0 - std::exp(-Tr / tau)) / 60.0);
+  std::printf("[figure] CAN spindle 0 -> 3000 rpm: feed waited %.3f s (closed form %.3f s)\n",
+              wait_s, expected_s);
+  EXPECT_EQ(st["spindle"]["waits"].get<std::uint64_t>(), 1u);
+  EXPECT_TRUE(st["spindle"]["feedback"].get<bool>());
+  EXPECT_GE(wait_s, expected_s - 0.005);
+  EXPECT_LE(wait_s, expected_s + 0.030);
+  EXPECT_NE(d.log().find("spindle at speed"), std::string::npos) << d.log();
+  EXPECT_EQ(d.terminate_and_wait(SIGTERM), 0) << d.log();
+  sim.stop();
 }

@@ -200,7 +200,10 @@ int main(int argc, char** argv) {
         std::cerr << "contour-machine-sim: axis " << ax.name
                   << ": delay_cycles 0 cannot be matched over CAN (one period is the minimum)\n";
     }
-    if (s.spindle) s.counts_per_mm = 4096.0;  // counts per revolution
+    if (s.spindle) {
+      s.counts_per_mm = 4096.0;  // counts per revolution
+      s.spindle_tau_s = cfg.spindle.sim_tau_s;  // the same lag the offline model (SimBus) uses
+    }
     setups.push_back(s);
   }
   try {
