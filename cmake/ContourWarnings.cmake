@@ -9,7 +9,10 @@ target_compile_options(contour_warnings INTERFACE
 # contour_add_gtests(LABEL <label> LIBS <libs...> SOURCES <files...>)
 # One executable per test source; tests are discovered at ctest time and carry the label.
 function(contour_add_gtests)
-  cmake_parse_arguments(A "" "LABEL" "LIBS;SOURCES" ${ARGN})
+  cmake_parse_arguments(A "" "LABEL;TIMEOUT" "LIBS;SOURCES" ${ARGN})
+  if(NOT A_TIMEOUT)
+    set(A_TIMEOUT 600)
+  endif()
   foreach(src IN LISTS A_SOURCES)
     get_filename_component(name ${src} NAME_WE)
     set(tgt ${A_LABEL}_${name})
@@ -20,7 +23,7 @@ function(contour_add_gtests)
     target_compile_definitions(${tgt} PRIVATE CONTOUR_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
                                CONTOUR_BINARY_DIR="${PROJECT_BINARY_DIR}")
     gtest_discover_tests(${tgt} DISCOVERY_MODE PRE_TEST
-                         PROPERTIES LABELS ${A_LABEL} TIMEOUT 600
+                         PROPERTIES LABELS ${A_LABEL} TIMEOUT ${A_TIMEOUT}
                          WORKING_DIRECTORY ${PROJECT_SOURCE_DIR})
   endforeach()
 endfunction()

@@ -69,6 +69,26 @@ int axis_index(const json& v, const config::MachineConfig& m) {
   throw CommandError("argument 'axis' must be an axis name or index");
 }
 
+json Daemon::counters_json(const LoopStatus& st) const {
+  json faults = json::object();
+  for (std::size_t c = 1; c < kFaultCauseCount; ++c)
+    faults[std::string(to_string(static_cast<FaultCause>(c)))] = st.fault_counts[c];
+  json j{{"faults", faults},
+         {"resets", st.resets},
+         {"emcy_frames", st.emcy_frames},
+         {"missed_tpdos", st.missed_tpdos},
+         {"reloads", reloads_.load()},
+         {"reloads_rejected", reloads_rejected_.load()}};
+  if (server_) {
+    const auto s = server_->stats();
+    j["socket"] = {{"connections", s.connections},
+                   {"requests", s.requests},
+                   {"errors", s.errors},
+                   {"dropped_clients", s.dropped_clients}};
+  }
+  return j;
+}
+
 json Daemon::status_json() {
   const auto st = loop_->status();
   const int axes = loop_->axes();
@@ -101,6 +121,7 @@ json Daemon::status_json() {
          {"accel_clamps", st.accel_clamps},
          {"limits_generation", st.limits_generation},
          {"spindle_rpm_cmd", st.spindle_rpm_cmd},
+         {"counters", counters_json(st)},
          {"spindle",
           {{"present", st.spindle_present},
            {"feedback", st.spindle_feedback},

@@ -216,11 +216,14 @@ void Daemon::reload_config() {
   } catch (const config::ConfigError& e) {
     for (const auto& m : e.errors()) spdlog::error("SIGHUP: {}", m);
     spdlog::error("SIGHUP: configuration rejected; nothing changed");
+    ++reloads_rejected_;
     return;
   } catch (const std::exception& e) {
     spdlog::error("SIGHUP: {}; nothing changed", e.what());
+    ++reloads_rejected_;
     return;
   }
+  ++reloads_;
   try {
     std::array<control::FeedDriveParams, 3> dp{};
     int delay = 0;

@@ -76,6 +76,7 @@ class Daemon {
   void on_bus_message(const std::string& text);
   void free_released_jobs();
   nlohmann::json status_json();
+  nlohmann::json counters_json(const LoopStatus& st) const;
   nlohmann::json result_json(std::uint64_t job);
   MachineState post_and_wait(const LoopCommand& c, MachineState from, double timeout_s);
   nlohmann::json cmd_load(const nlohmann::json& req);
@@ -100,6 +101,8 @@ class Daemon {
   RtThread rt_;
   RtSetupReport rt_report_;
   std::atomic<bool> rt_stop_{false};
+  std::atomic<std::uint64_t> reloads_{0};           // SIGHUP reloads applied
+  std::atomic<std::uint64_t> reloads_rejected_{0};  // SIGHUP with a config that did not load
   std::atomic<bool> shutdown_{false};
   std::atomic<bool> components_ready_{false};  // loop_/server_ published (bus event thread reads)
 

@@ -6,6 +6,7 @@
 // cause is gone (the caller says so), and goes to DISABLED (drives must be re-enabled).
 // Pure logic, noexcept, no allocation: the RT thread owns the instance; other threads post
 // requests through the command mailbox and read the published state.
+#include <cstddef>
 #include <cstdint>
 #include <string_view>
 
@@ -33,6 +34,7 @@ enum class FaultCause : std::uint8_t {
   kEstopCommand,
   kInternal,
 };
+inline constexpr std::size_t kFaultCauseCount = static_cast<std::size_t>(FaultCause::kInternal) + 1;
 
 enum class Request : std::uint8_t { kEnable, kEnabled, kRun, kHold, kResume, kStop, kStopped, kDone,
                                     kReset, kDisable };

@@ -248,6 +248,7 @@ void ServoLoop::transition(const Transition& t, FaultCause cause) noexcept {
 void ServoLoop::raise_fault(FaultCause c, int axis, double value, double limit) noexcept {
   const Transition t = sm_.fault(c);
   if (!t.accepted) return;
+  ++fault_counts_[static_cast<std::size_t>(c)];
   fault_axis_ = axis;
   fault_value_ = value;
   fault_limit_ = limit;
@@ -285,6 +286,7 @@ void ServoLoop::hold_here() noexcept {
 void ServoLoop::enter_estop(FaultCause cause) noexcept {
   const Transition t = sm_.estop(cause);
   if (!t.accepted) return;
+  ++fault_counts_[static_cast<std::size_t>(cause)];
   emit(EventKind::kFault, cause);
   transition(t, cause);
   if (job_ != nullptr) detach_job(false);
@@ -431,6 +433,7 @@ bool ServoLoop::try_reset() noexcept {
   gone = gone && !fb_.spindle.fault;
   const Transition t = sm_.reset(gone);
   if (!t.accepted) return false;
+  ++resets_;
   transition(t, FaultCause::kNone);
   force_fallback_ = false;
   fault_axis_ = -1;
@@ -940,6 +943,9 @@ void ServoLoop::publish() noexcept {
   pub_.force_fallback = force_fallback_;
   pub_.force_fallbacks = force_fallbacks_;
   pub_.spindle_rpm_cmd = out_.spindle_rpm;
+  pub_.fault_counts = fault_counts_;
+  pub_.resets = resets_;
+  pub_.emcy_frames = fb_.emcy_count;
   pub_.spindle_present = spindle_present_;
   pub_.spindle_feedback = fb_.spindle.present;
   pub_.spindle_target_rpm = spindle_target_rpm_;

@@ -207,6 +207,10 @@ struct LoopStatus {
   bool spindle_waiting = false;     // a feed move waits for at-speed
   std::uint64_t spindle_waits = 0;  // feed moves that waited
   double spindle_last_wait_s = 0.0; // how long the last wait took
+  // Counters since start (soak test: they must match what was injected).
+  std::array<std::uint32_t, kFaultCauseCount> fault_counts{};  // FAULT/ESTOP entries by cause
+  std::uint64_t resets = 0;         // accepted resets (FAULT/ESTOP -> re-enable)
+  std::uint64_t emcy_frames = 0;    // EMCY frames the bus received
   // Outputs for the GPIO lines (applied by the I/O supervisor) and the E-stop input.
   bool out_drive_enable = false;
   bool out_spindle_enable = false;
@@ -341,6 +345,8 @@ class ServoLoop {
   std::int64_t spindle_wait_cycles_ = 0;
   std::uint64_t spindle_waits_ = 0;
   double spindle_last_wait_s_ = 0.0;
+  std::array<std::uint32_t, kFaultCauseCount> fault_counts_{};
+  std::uint64_t resets_ = 0;
   bool estop_input_ = false;
   std::uint64_t accel_clamps_ = 0;
 

@@ -25,8 +25,8 @@ tools/build.sh "$preset"
 echo "test.sh: build ($preset) took $(( $(date +%s) - start )) s"
 
 status=0
-exclude="hil"
-[ "$slow" = 1 ] || exclude="hil|slow"
+exclude="hil|soak"
+[ "$slow" = 1 ] || exclude="hil|soak|slow"
 echo "== unit + sim tests ($preset) =="
 ctest --test-dir "build/$preset" -LE "$exclude" --output-on-failure -j "$(nproc)" || status=1
 
@@ -36,6 +36,11 @@ if [ "$hil" = 1 ]; then
   tools/with-vcan --ifaces vcan0,vcan1 -- \
     ctest --test-dir "build/$preset" -L "$hil_label" -LE "$([ "$slow" = 1 ] && echo '^$' || echo slow)" \
     --output-on-failure || status=1
+  if [ "$slow" = 1 ]; then
+    echo "== soak / fault storm ($preset, CONTOUR_SOAK_S=${CONTOUR_SOAK_S:-600} simulated s) =="
+    tools/with-vcan --ifaces vcan0,vcan1 --timeout 7200 -- \
+      ctest --test-dir "build/$preset" -L soak --output-on-failure -V || status=1
+  fi
 fi
 
 if [ "$dev_unit" = 1 ]; then

@@ -69,6 +69,21 @@ class MachineSim {
   }
   ~MachineSim() { stop(); }
   [[nodiscard]] bool ready() const { return ready_; }
+  // Reads what the child printed so far without blocking (long runs: keeps its stdout pipe from
+  // filling up and stalling it) and returns everything printed up to now.
+  const std::string& poll_output() {
+    if (pid_ <= 0) return output_;
+    for (;;) {
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, 0) != 1) break;
+      char buf[4096];
+      const ssize_t n = ::read(fd_, buf, sizeof buf);
+      if (n <= 0) break;
+      output_.append(buf, static_cast<std::size_t>(n));
+    }
+    return output_;
+  }
+  [[nodiscard]] pid_t pid() const { return pid_; }
   // Stops the child (SIGTERM) and returns everything it printed (the JSON summary last).
   std::string stop() {
     if (pid_ > 0) {

@@ -12,6 +12,7 @@
 #include "config/config.hpp"
 #include "daemon/io_channels.hpp"
 #include "daemon/servo_loop.hpp"
+#include "tests/support/alloc_counter.hpp"
 #include "tests/support/sim_vfd.hpp"
 #include "tests/unit/daemon/loop_rig.hpp"
 
@@ -89,6 +90,30 @@ TEST(SpindleLoop, FeedMoveWaitsUntilTheSpindleIsAtSpeed) {
               "(closed form %.3f s), speed at feed start %.1f rpm\n",
               st.spindle_last_wait_s, expected_s, t.rpm_at_motion);
   EXPECT_NEAR(st.spindle_last_wait_s, expected_s, 0.005);  // a few cycles of transport delay
+}
+
+TEST(SpindleLoop, NoAllocationWhileWaitingForTheSpindleAndCutting) {
+  SpindleRig r(spindle_config());
+  ASSERT_TRUE(r.enable());
+  r.load("G21 G90\nM3 S6000\nG01 X5 F1200\nS8000\nG01 X10\nM5\nM2\n", 1);
+  r.loop.post({CommandKind::kRun});
+  r.step(3);
+  ASSERT_TRUE(r.loop.status().spindle_waiting);
+  RtEvent e;
+  std::size_t allocs = 0;
+  {
+    test::AllocGuard g;
+    for (int i = 0; i < 8000; ++i) {
+      r.loop.cycle();
+      while (r.loop.events().pop(e)) {}
+      TelemetrySample s;
+      while (r.loop.telemetry().pop(s)) {}
+    }
+    allocs = g.counts().total();
+  }
+  EXPECT_EQ(allocs, 0u);
+  EXPECT_TRUE(r.loop.status().finished_ok);
+  EXPECT_EQ(r.loop.status().spindle_waits, 2u);
 }
 
 TEST(SpindleLoop, StalledSpindleFaultsAfterTheTimeoutWithoutMovingTheAxes) {
