@@ -716,8 +716,7 @@ void ServoLoop::cycle() noexcept {
         break;
       }
     }
-    if (fb_.spindle.fault && sm_.state() != MachineState::kFault)
-      raise_fault(FaultCause::kSpindleFault, -1, fb_.spindle.actual_rpm, 0.0);
+    if (fb_.spindle.fault) raise_fault(FaultCause::kSpindleFault, -1, fb_.spindle.actual_rpm, 0.0);
     if (fb_.heartbeat_lost) raise_fault(FaultCause::kHeartbeatLost, fb_.heartbeat_lost_node, 1.0, 0.0);
     if (fb_.bus_error) raise_fault(FaultCause::kBusError, -1, 1.0, 0.0);
   }

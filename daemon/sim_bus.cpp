@@ -86,7 +86,7 @@ void SimBus::read(BusFeedback& fb) noexcept {
   fb.spindle.fresh = fb.spindle.present;
   fb.spindle.actual_rpm = spindle_rpm_;
   fb.spindle.enabled = fb.spindle.present && mode_ == DriveMode::kEnabled;
-  fb.spindle.fault = false;
+  fb.spindle.fault = fb.spindle.present && spindle_fault_;
 }
 
 void SimBus::write(const AxisCommands& cmd) noexcept {

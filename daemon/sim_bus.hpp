@@ -50,6 +50,7 @@ class SimBus final : public AxisBus {
   void configure_spindle(double tau_s) noexcept { spindle_tau_s_ = tau_s; }
   // The spindle is jammed / its drive does not follow (stays at its speed).
   void inject_spindle_stall(bool on) noexcept { spindle_stall_ = on; }
+  void inject_spindle_fault(bool on) noexcept { spindle_fault_ = on; }
   // The mode of the last write() (what the RPDOs of this cycle asked for).
   [[nodiscard]] DriveMode written_mode() const noexcept { return received_mode_; }
 
@@ -67,6 +68,7 @@ class SimBus final : public AxisBus {
   double spindle_latched_rpm_ = 0.0;
   double spindle_received_rpm_ = 0.0;
   std::atomic<bool> spindle_stall_{false};
+  std::atomic<bool> spindle_fault_{false};
   std::uint64_t cycle_ = 0;
   std::array<double, kMaxAxes> can_cpm_{};  // 0 = ideal bus
   bool can_velocity_mapped_ = false;

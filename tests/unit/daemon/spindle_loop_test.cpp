@@ -116,6 +116,22 @@ TEST(SpindleLoop, NoAllocationWhileWaitingForTheSpindleAndCutting) {
   EXPECT_EQ(r.loop.status().spindle_waits, 2u);
 }
 
+TEST(SpindleLoop, SpindleDriveFaultStopsTheMachineAndResetNeedsItGone) {
+  SpindleRig r(spindle_config());
+  ASSERT_TRUE(r.enable());
+  r.bus.inject_spindle_fault(true);
+  r.step(2);
+  EXPECT_EQ(r.loop.status().state, MachineState::kFault);
+  EXPECT_EQ(r.loop.status().cause, FaultCause::kSpindleFault);
+  r.loop.post({CommandKind::kReset});
+  r.step(300);  // the reset window (250 cycles) passes: refused
+  EXPECT_EQ(r.loop.status().state, MachineState::kFault);
+  r.bus.inject_spindle_fault(false);
+  r.loop.post({CommandKind::kReset});
+  r.step(20);
+  EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+}
+
 TEST(SpindleLoop, StalledSpindleFaultsAfterTheTimeoutWithoutMovingTheAxes) {
   auto cfg = spindle_config();
   cfg.spindle.at_speed_timeout_s = 1.0;
