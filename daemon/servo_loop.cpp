@@ -925,7 +925,9 @@ void ServoLoop::publish() noexcept {
   pub_.jogging = jogging_;
   pub_.interp_holding = iout_.status == control::InterpStatus::kHolding;
   pub_.recording = recording_;
-  pub_.drives_enabled = fb_.axes > 0 && fb_.axis[0].enabled;
+  bool all_enabled = fb_.axes > 0;
+  for (int i = 0; i < fb_.axes && i < kMaxAxes; ++i) all_enabled = all_enabled && fb_.axis[static_cast<std::size_t>(i)].enabled;
+  pub_.drives_enabled = all_enabled;  // every axis drive in operation enabled
   pub_.accel_clamps = accel_clamps_;
   pub_.limits_generation = limits_generation_;
   pub_.force_available = force_configured_;

@@ -180,7 +180,7 @@ struct LoopStatus {
   bool jogging = false;
   bool interp_holding = false;      // M0/M1/M6 hold in the program
   bool recording = false;
-  bool drives_enabled = false;
+  bool drives_enabled = false;     // every axis drive in operation enabled
   std::uint64_t accel_clamps = 0;
   std::uint64_t limits_generation = 0;
   // Force channel (step 3 / 7).
