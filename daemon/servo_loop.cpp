@@ -509,9 +509,7 @@ void ServoLoop::cycle() noexcept {
   ref_prev_ = ref_;
   control::InterpStatus ist = control::InterpStatus::kIdle;
   if (st == MachineState::kEnabling) {
-    bool all = true;
-    for (int i = 0; i < axes_; ++i) all = all && fb_.axis[static_cast<std::size_t>(i)].enabled;
-    if (all) {
+    if (all_axes_enabled()) {
       hold_here();
       transition(sm_.apply(Request::kEnabled), FaultCause::kNone);
       st = sm_.state();
@@ -572,11 +570,8 @@ void ServoLoop::cycle() noexcept {
         spindle_waiting_ = true;
         // Judged on the target of the marker (the ramp and the feedback of the previous cycle
         // must both be there): at_speed_ of an older target does not count.
-        const double target = iout_.spindle == control::SpindleDir::kOff ? 0.0
-                              : drivers::clamp_spindle_rpm(
-                                    iout_.spindle == control::SpindleDir::kCcw ? -iout_.spindle_rpm
-                                                                               : iout_.spindle_rpm,
-                                    cfg_.spindle.limits);
+        const double target =
+            drivers::clamp_spindle_rpm(programmed_spindle_rpm(), cfg_.spindle.limits);
         if (spindle_at_speed_ && target == spindle_target_rpm_) {
           spindle_waiting_ = false;
           ++spindle_waits_;
@@ -786,10 +781,7 @@ void ServoLoop::cycle() noexcept {
 void ServoLoop::force_step(MachineState st) noexcept {
   const bool in_prog =
       job_ != nullptr && (st == MachineState::kRunning || st == MachineState::kHold);
-  double programmed_rpm = 0.0;
-  if (in_prog && iout_.spindle != control::SpindleDir::kOff) {
-    programmed_rpm = iout_.spindle == control::SpindleDir::kCcw ? -iout_.spindle_rpm : iout_.spindle_rpm;
-  }
+  const double programmed_rpm = in_prog ? programmed_spindle_rpm() : 0.0;
   if (!force_configured_) {
     force_override_ = 1.0;
     spindle_rpm_cmd_ = programmed_rpm;
@@ -854,6 +846,21 @@ void ServoLoop::force_step(MachineState st) noexcept {
                          ? std::copysign(fout_.spindle_rpm, programmed_rpm != 0.0 ? programmed_rpm : 1.0)
                          : programmed_rpm;
   if (io_ != nullptr) io_->set_spindle_rpm(std::abs(spindle_rpm_cmd_));
+}
+
+double ServoLoop::programmed_spindle_rpm() const noexcept {
+  switch (iout_.spindle) {
+    case control::SpindleDir::kCw: return iout_.spindle_rpm;
+    case control::SpindleDir::kCcw: return -iout_.spindle_rpm;
+    case control::SpindleDir::kOff: break;
+  }
+  return 0.0;
+}
+
+bool ServoLoop::all_axes_enabled() const noexcept {
+  bool all = axes_ > 0;
+  for (int i = 0; i < axes_; ++i) all = all && fb_.axis[static_cast<std::size_t>(i)].enabled;
+  return all;
 }
 
 void ServoLoop::spindle_step(DriveMode mode) noexcept {
@@ -925,9 +932,7 @@ void ServoLoop::publish() noexcept {
   pub_.jogging = jogging_;
   pub_.interp_holding = iout_.status == control::InterpStatus::kHolding;
   pub_.recording = recording_;
-  bool all_enabled = fb_.axes > 0;
-  for (int i = 0; i < fb_.axes && i < kMaxAxes; ++i) all_enabled = all_enabled && fb_.axis[static_cast<std::size_t>(i)].enabled;
-  pub_.drives_enabled = all_enabled;  // every axis drive in operation enabled
+  pub_.drives_enabled = all_axes_enabled();
   pub_.accel_clamps = accel_clamps_;
   pub_.limits_generation = limits_generation_;
   pub_.force_available = force_configured_;

@@ -336,6 +336,10 @@ class ServoLoop {
   double spindle_rpm_cmd_ = 0.0;  // target before the limits
   // Spindle: limits and ramp (issue 8), at-speed wait of feed moves (kSpindleSync markers).
   void spindle_step(DriveMode mode) noexcept;
+  // Signed speed of the interpolator's modal spindle state (M3 +, M4 -, M5 0), before the limits.
+  [[nodiscard]] double programmed_spindle_rpm() const noexcept;
+  // Every axis drive reports CiA 402 "operation enabled" (this cycle's feedback).
+  [[nodiscard]] bool all_axes_enabled() const noexcept;
   bool spindle_present_ = false;
   drivers::SpindleRamp spindle_ramp_{drivers::SpindleLimits{}};
   double spindle_target_rpm_ = 0.0;

@@ -2,6 +2,7 @@
 // override keeps the path, holds.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -26,6 +27,22 @@ double brute_progress(int taps1, int taps2, std::int64_t k, std::int64_t n) {
   double s = 0;
   for (int j = 0; j < taps2; ++j) s += box1(k - j);
   return s / taps2;
+}
+
+// Ends the program (M2) and loads every planned segment into a default interpolator; returns the
+// kinds of the segments loaded.
+std::vector<SegmentKind> end_and_load(BlendPlanner& pl, Interpolator& ip) {
+  Block e;
+  e.kind = BlockKind::kEnd;
+  pl.push(e);
+  ip.configure(InterpolatorParams{}, Vector3d::Zero());
+  std::vector<SegmentKind> kinds;
+  PlannedSegment s;
+  while (pl.pop(s)) {
+    kinds.push_back(s.kind);
+    ip.push(s);
+  }
+  return kinds;
 }
 
 std::vector<PlannedSegment> plan_square(BlendMode mode) {
@@ -135,13 +152,8 @@ TEST(Interpolator, HoldsAtProgramStopUntilResumed) {
   b.line = 3;
   b.seg = PathSegment::line(Vector3d(5, 0, 0), Vector3d(5, 5, 0));
   pl.push(b);
-  Block e;
-  e.kind = BlockKind::kEnd;
-  pl.push(e);
   Interpolator ip;
-  ip.configure(InterpolatorParams{}, Vector3d::Zero());
-  PlannedSegment s;
-  while (pl.pop(s)) ip.push(s);
+  end_and_load(pl, ip);
   InterpOutput out;
   int n = 0;
   while (ip.step(1.0, out) != InterpStatus::kHolding) ASSERT_LT(++n, 100000);
@@ -174,17 +186,9 @@ TEST(Interpolator, FeedMoveAfterASpindleChangeWaitsAtAnExactStopWithTheNewSpeedO
   move(3, 15, false, SpindleDir::kCw, 6000);
   move(4, 20, false, SpindleDir::kCw, 8000);
   move(5, 25, false, SpindleDir::kOff, 0);
-  Block e;
-  e.kind = BlockKind::kEnd;
-  pl.push(e);
   Interpolator ip;
-  ip.configure(InterpolatorParams{}, Vector3d::Zero());
-  PlannedSegment s;
-  int markers = 0;
-  while (pl.pop(s)) {
-    markers += s.kind == SegmentKind::kSpindleSync ? 1 : 0;
-    ip.push(s);
-  }
+  const auto kinds = end_and_load(pl, ip);
+  const auto markers = std::count(kinds.begin(), kinds.end(), SegmentKind::kSpindleSync);
   EXPECT_EQ(markers, 2);
   InterpOutput out;
   std::vector<double> wait_x, wait_rpm;
