@@ -6,7 +6,7 @@
 
 namespace contour::daemon {
 
-OfflineResult run_offline(const config::Config& cfg, const ProgramSource& src,
+OfflineResult run_offline(const config::Config& cfg, const ProgramText& src,
                           std::uint64_t max_cycles, const std::string& csv_path) {
   // With bus.type socketcan the offline run models the CANopen drive's integer units (velocity
   // target in counts/s, position in counts), so it reproduces a HIL run against

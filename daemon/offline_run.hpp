@@ -26,7 +26,7 @@ struct OfflineResult {
 };
 
 // Throws ProgramError / std::runtime_error. max_cycles bounds the run.
-OfflineResult run_offline(const config::Config& cfg, const ProgramSource& src,
+OfflineResult run_offline(const config::Config& cfg, const ProgramText& src,
                           std::uint64_t max_cycles = 2'000'000,
                           const std::string& csv_path = "");
 

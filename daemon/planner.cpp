@@ -14,7 +14,7 @@ namespace contour::daemon {
 
 namespace {
 
-std::unique_ptr<std::istream> open_source(const ProgramSource& src) {
+std::unique_ptr<std::istream> open_source(const ProgramText& src) {
   if (!src.path.empty()) {
     auto f = std::make_unique<std::ifstream>(src.path);
     if (!*f) throw ProgramError(src.path + ": cannot open program file");
@@ -57,7 +57,7 @@ control::InterpolatorParams ProgramPlanner::interpolator_params() const {
   return ip;
 }
 
-ProgramSummary ProgramPlanner::validate(const ProgramSource& src,
+ProgramSummary ProgramPlanner::validate(const ProgramText& src,
                                         const Eigen::Vector3d& start_mm) const {
   control::ProgramSetup setup = config::to_program_setup(cfg_.program, cfg_.interpolator);
   setup.start_mm = start_mm;
@@ -105,7 +105,7 @@ ProgramSummary ProgramPlanner::validate(const ProgramSource& src,
   return sum;
 }
 
-std::shared_ptr<ProgramJob> ProgramPlanner::start(const ProgramSource& src,
+std::shared_ptr<ProgramJob> ProgramPlanner::start(const ProgramText& src,
                                                   const Eigen::Vector3d& start_mm,
                                                   std::uint64_t job_id, SegmentSink sink) {
   abort_and_join();
@@ -148,7 +148,7 @@ bool ProgramPlanner::wait_prefill(const ProgramJob& job, double timeout_s) {
   return false;
 }
 
-void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramSource src,
+void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
                           Eigen::Vector3d start_mm, SegmentSink sink) {
   try {
     control::ProgramSetup setup = config::to_program_setup(cfg_.program, cfg_.interpolator);

@@ -23,7 +23,8 @@
 
 namespace contour::daemon {
 
-struct ProgramSource {
+// A part program as the planner reads it: a file on the daemon's host or inline text.
+struct ProgramText {
   std::string name;  // file name for messages ("<inline>" for text)
   std::string path;  // read from this file when non-empty
   std::string text;  // else this inline program
@@ -50,12 +51,12 @@ class ProgramPlanner {
   ProgramPlanner& operator=(const ProgramPlanner&) = delete;
 
   // Parse + soft-limit pass from start_mm. Throws ProgramError("file:line:column: message").
-  ProgramSummary validate(const ProgramSource& src, const Eigen::Vector3d& start_mm) const;
+  ProgramSummary validate(const ProgramText& src, const Eigen::Vector3d& start_mm) const;
 
   // Creates the job (interpolator configured at start_mm) and starts planning on a new thread.
   // A previous planner thread is aborted and joined first. sink (may be empty) sees every planned
   // segment (the telemetry writer's geometry for the true contour error).
-  std::shared_ptr<ProgramJob> start(const ProgramSource& src, const Eigen::Vector3d& start_mm,
+  std::shared_ptr<ProgramJob> start(const ProgramText& src, const Eigen::Vector3d& start_mm,
                                     std::uint64_t job_id, SegmentSink sink);
 
   [[nodiscard]] std::string error() const;  // planning error of the last job ("" if none)
@@ -67,7 +68,7 @@ class ProgramPlanner {
   [[nodiscard]] control::InterpolatorParams interpolator_params() const;
 
  private:
-  void plan(std::shared_ptr<ProgramJob> job, ProgramSource src, Eigen::Vector3d start_mm,
+  void plan(std::shared_ptr<ProgramJob> job, ProgramText src, Eigen::Vector3d start_mm,
             SegmentSink sink);
 
   config::Config cfg_;

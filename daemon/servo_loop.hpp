@@ -1,25 +1,27 @@
 #pragma once
-// The real-time servo cycle (architecture.md "The 1 kHz cycle", issue 9 "Real-time loop").
-//
-// ServoLoop::cycle() runs ONE cycle, in this order:
-//   1. a staged gains/limits swap (cycle boundary; ServoController::set_gains keeps the
-//      controller state, so it is allowed in every state, RUNNING and HOLD included)
-//   2. bus.begin_cycle() (SYNC), bus.read() (TPDOs; missed ones counted), queued commands
-//   3. latest force sample and the E-stop input latch from the RtIo (io_channels.hpp), if any
-//   4. drain planned segments into the interpolator, interpolator step (override ramps for
-//      hold / stop / underrun), or the jog / hold reference outside a program
-//   5. contour-error model (push R(k), update with the Smith-predicted P_hat)
-//   6. axis + coupling controllers (control/servo_controller.hpp), v = K*u, velocity clamp, then
-//      acceleration clamp |v - v_actual| <= a_max * tau_drive (both counted, both live limits)
-//   7. force controller (control/force_controller.hpp) while RUNNING/HOLD with force control on:
-//      feed override (applied by the interpolator from the NEXT cycle: step 4 already ran) and
-//      spindle speed command; stale/invalid force -> the configured fallback, an RT event, and
-//      (LoopOptions::force_stale_faults) FAULT "stale force sample"
-//   8. bus.write() (RPDOs, AxisCommands::spindle_rpm)
-//   9. safety: E-stop input latch -> ESTOP in this cycle; following error (LinuxCNC-like band),
-//      contour error, soft limits on the reference, drive fault bits, heartbeat loss,
-//      missed-TPDO streak -> FAULT with a named cause
-//  10. telemetry sample into an SPSC ring (dropped, never blocking, when full)
+// The real-time servo cycle (architecture.md "The 1 kHz cycle", issue 9 "Real-time loop"), as a
+// pipeline of named stages (ros2_control's read -> update -> write; moteus' latched faults).
+// ServoLoop::cycle() runs ONE cycle:
+//   boundary   the staged gains/limits swap (ServoController::set_gains keeps the controller
+//              state, so it is allowed in every state, RUNNING and HOLD included)
+//   read       SYNC, TPDOs (missed ones counted), force sample, E-stop input -> one Feedback
+//              snapshot (daemon/loop_stages.hpp); every later stage reads only the snapshot
+//   commands   the pending reset window, then queued commands (after the TPDOs, so that `reset`
+//              judges the drives' current fault bits); E-stop input latch -> ESTOP this cycle
+//   logic      one scan of the machine logic over the snapshot (room for the soft PLC; its
+//              requests go through the state machine and the supervisor, never around them)
+//   reference  the state machine's ENABLING -> READY step, then exactly one reference source
+//              (daemon/reference_sources.hpp: program, jog, hold, stop) -> RefPoint
+//   control    contour-error model (Smith-predicted P_hat), axis + coupling controllers,
+//              v = K*u, velocity clamp, acceleration clamp |v - v_actual| <= a_max * tau_drive;
+//              or the stop source's ramp (FAULT), quick stop (ESTOP), zero (otherwise)
+//   channels   force (2-DOF controller -> feed override from the NEXT cycle, spindle speed) and
+//              spindle (limits, ramp, at-speed) (daemon/loop_channels.hpp)
+//   write      RPDOs (velocities, drive mode, spindle speed)
+//   supervise  every safety rule in SafetySupervisor (daemon/safety_supervisor.hpp): drive and
+//              bus faults, following error, soft limits, contour error -> FAULT with a named
+//              cause; the program's in-position check at its end
+//   publish    telemetry sample (SPSC ring, dropped when full) and the seqlock status
 // cycle() is noexcept, allocation-free and lock-free and does not log: events go to an SPSC ring
 // of fixed-size records. Budget: < 50 us at 1 kHz (measured: see daemon/README.md).
 //
@@ -44,50 +46,16 @@
 #include "control/force_controller.hpp"
 #include "daemon/axis_bus.hpp"
 #include "daemon/io_channels.hpp"
+#include "daemon/loop_channels.hpp"
+#include "daemon/loop_stages.hpp"
 #include "daemon/machine_state.hpp"
+#include "daemon/program_job.hpp"
+#include "daemon/reference_sources.hpp"
 #include "daemon/rt_timing.hpp"
+#include "daemon/safety_supervisor.hpp"
 #include "daemon/spsc_ring.hpp"
 
 namespace contour::daemon {
-
-// PlannedSegment holds Eigen vectors (not trivially copyable): the planner -> loop queue carries
-// this plain record and the loop converts it back (no allocation).
-struct SegmentRecord {
-  control::SegmentKind kind = control::SegmentKind::kMotion;
-  std::int64_t start_cycle = 0;
-  std::int64_t samples = 0;
-  std::array<double, 3> start_mm{};
-  std::array<double, 3> end_mm{};
-  double length_mm = 0.0;
-  double path_start_mm = 0.0;
-  double feed_mm_min = 0.0;
-  int line = 0;
-  control::SpindleDir spindle = control::SpindleDir::kOff;
-  double spindle_rpm = 0.0;
-  bool mist = false;
-  bool flood = false;
-  int tool = 0;
-  int message_id = -1;
-};
-SegmentRecord to_record(const control::PlannedSegment& s) noexcept;
-void from_record(const SegmentRecord& r, control::PlannedSegment& s) noexcept;
-
-// A program handed to the loop: an interpolator configured off-RT and the planner's bounded
-// segment queue. Owned by the non-RT side; the loop holds a raw pointer between attach and
-// the acknowledgement (LoopStatus::attached_job / released_job).
-struct ProgramJob {
-  ProgramJob(std::uint64_t job_id, const control::InterpolatorParams& ip,
-             const Eigen::Vector3d& start_mm, std::size_t queue_capacity)
-      : id(job_id), queue(queue_capacity) {
-    interp.configure(ip, start_mm);
-  }
-  std::uint64_t id = 0;
-  control::Interpolator interp;
-  SpscRing<SegmentRecord> queue;
-  std::atomic<bool> planner_done{false};    // every segment has been pushed
-  std::atomic<bool> planner_failed{false};  // planning error: the loop stops the program
-  std::atomic<bool> abort{false};           // set by the loop/daemon: planner stops
-};
 
 enum class CommandKind : std::uint8_t {
   kEnable, kDisable, kRun, kHold, kResume, kStop, kEstop, kReset, kJog, kAttachJob,
@@ -155,6 +123,7 @@ struct TelemetrySample {
 struct LoopStatus {
   std::uint64_t cycle = 0;
   MachineState state = MachineState::kDisabled;
+  SourceKind source = SourceKind::kHold;  // the reference source of the last cycle
   FaultCause cause = FaultCause::kNone;
   int fault_axis = -1;
   double fault_value = 0.0;
@@ -219,19 +188,6 @@ struct LoopStatus {
   bool estop_input = false;         // RtIo latch seen by the loop
 };
 
-// Safety limits that may change live (SIGHUP, swapped like the gains). Units in the names.
-struct LiveLimits {
-  double ferror_mm = 1.0;
-  double min_ferror_mm = 0.1;
-  double contour_error_limit_mm = 0.5;
-  double stop_decel_mm_s2 = 1000.0;
-  std::array<double, 3> max_velocity_mm_s{};
-  std::array<double, 3> max_accel_mm_s2{};
-};
-LiveLimits live_limits_from(const config::Config& cfg);
-// Throws std::invalid_argument naming the field (non-finite, <= 0, min_ferror > ferror).
-void validate(const LiveLimits& l, int axes);
-
 struct LoopOptions {
   // A stale/invalid force sample while force control is on faults the machine ("stale force
   // sample") instead of only the fallback: config `force.fallback: fault`.
@@ -270,14 +226,29 @@ class ServoLoop {
   // Non-RT (takes the producer mutex); a copy, never a reference into RT-owned data.
   [[nodiscard]] control::ServoParams active_params() const;
   [[nodiscard]] LiveLimits active_limits() const;
-  [[nodiscard]] bool force_configured() const noexcept { return force_configured_; }
+  [[nodiscard]] bool force_configured() const noexcept { return force_.configured(); }
   [[nodiscard]] double period_s() const noexcept { return period_s_; }
   [[nodiscard]] int axes() const noexcept { return axes_; }
 
  private:
+  // Stages of cycle(), in order (see the header comment).
+  void take_staged() noexcept;
+  void read() noexcept;
+  void run_commands() noexcept;
+  void logic() noexcept {}  // the machine-logic scan lands here (soft PLC)
+  MachineState advance_state() noexcept;
+  RefPoint reference(MachineState st, bool servo) noexcept;
+  AxisCommands control_step(const RefPoint& r, MachineState st, bool servo, double& eps_norm) noexcept;
+  void channels(MachineState st, AxisCommands& out) noexcept;
+  void write(const AxisCommands& out) noexcept;
+  void supervise(MachineState st, bool servo, double eps_norm) noexcept;
+  void publish_cycle() noexcept;
+
+  [[nodiscard]] SourceKind select_source(MachineState st) const noexcept;
+  void program_step(MachineState st, RefPoint& r) noexcept;
   void apply_command(const LoopCommand& c) noexcept;
   void transition(const Transition& t, FaultCause cause) noexcept;
-  void raise_fault(FaultCause c, int axis, double value, double limit) noexcept;
+  void raise_fault(const FaultReport& f) noexcept;
   void emit(EventKind k, FaultCause c = FaultCause::kNone, int axis = -1, double value = 0.0,
             double limit = 0.0) noexcept;
   void detach_job(bool ok) noexcept;
@@ -285,8 +256,12 @@ class ServoLoop {
   bool try_reset() noexcept;  // FAULT/ESTOP -> enable when every cause is gone
   void hold_here() noexcept;  // reference := current measured position, controller state reset
   void publish() noexcept;
-  void force_step(MachineState st) noexcept;
   void enter_estop(FaultCause cause) noexcept;
+  // Every axis drive reports CiA 402 "operation enabled" (this cycle's feedback).
+  [[nodiscard]] bool all_axes_enabled() const noexcept;
+  [[nodiscard]] bool in_program(MachineState st) const noexcept {
+    return program_.attached() && (st == MachineState::kRunning || st == MachineState::kHold);
+  }
 
   const config::Config cfg_;
   AxisBus& bus_;
@@ -296,13 +271,22 @@ class ServoLoop {
   double period_s_ = 0.001;
   std::array<double, 3> gain_per_s_{};
   std::array<double, 3> tau_s_{};  // drive velocity-loop lag (acceleration clamp)
-  std::array<double, 3> min_mm_{}, max_mm_{};
   LiveLimits limits_{};  // RT copy
 
   StateMachine sm_;
+  SafetySupervisor supervisor_;
   control::ServoController ctrl_;
   control::ServoParams base_params_{};  // start-up set: the structure live swaps must keep
   control::ContourErrorModel model_;
+
+  // Reference sources (one active per cycle) and channels.
+  ProgramSource program_;
+  JogSource jog_;
+  HoldSource hold_;
+  StopSource stop_;
+  SourceKind source_ = SourceKind::kHold;
+  ForceChannel force_;
+  SpindleChannel spindle_;
 
   // Command mailbox and gains/limits double buffer: the producer writes staged_* only while the
   // flag is clear; the loop reads them only while it is set, then clears it.
@@ -318,40 +302,8 @@ class ServoLoop {
   std::atomic<std::uint64_t> staged_limits_generation_{0};
   std::uint64_t limits_generation_ = 0;
 
-  // Force channel.
-  bool force_configured_ = false;
-  control::ForceController force_;
-  drivers::modbus::ForceReading reading_{};
-  double force_N_ = 0.0;
-  std::array<double, 3> force_xyz_N_{};
-  double force_age_s_ = 0.0;
-  bool force_requested_ = false;
-  double force_ref_N_ = 0.0;
-  double planned_progress_mm_ = 0.0;
-  control::ForceOutput fout_{};
-  double force_override_ = 1.0;
-  bool force_fallback_ = false;
-  bool force_ok_prev_ = true;
-  std::uint64_t force_fallbacks_ = 0;
-  double spindle_rpm_cmd_ = 0.0;  // target before the limits
-  // Spindle: limits and ramp (issue 8), at-speed wait of feed moves (kSpindleSync markers).
-  void spindle_step(DriveMode mode) noexcept;
-  // Signed speed of the interpolator's modal spindle state (M3 +, M4 -, M5 0), before the limits.
-  [[nodiscard]] double programmed_spindle_rpm() const noexcept;
-  // Every axis drive reports CiA 402 "operation enabled" (this cycle's feedback).
-  [[nodiscard]] bool all_axes_enabled() const noexcept;
-  bool spindle_present_ = false;
-  drivers::SpindleRamp spindle_ramp_{drivers::SpindleLimits{}};
-  double spindle_target_rpm_ = 0.0;
-  double spindle_out_rpm_ = 0.0;
-  bool spindle_at_speed_ = false;
-  bool spindle_waiting_ = false;
-  std::int64_t spindle_wait_cycles_ = 0;
-  std::uint64_t spindle_waits_ = 0;
-  double spindle_last_wait_s_ = 0.0;
   std::array<std::uint32_t, kFaultCauseCount> fault_counts_{};
   std::uint64_t resets_ = 0;
-  bool estop_input_ = false;
   std::uint64_t accel_clamps_ = 0;
 
   SpscRing<RtEvent> events_;
@@ -362,33 +314,19 @@ class ServoLoop {
   std::uint64_t cycle_ = 0;
   static constexpr int kResetWindowCycles = 250;  // a pending `reset` waits this long for causes
   int reset_pending_cycles_ = 0;
-  BusFeedback fb_{};
+  Feedback fb_{};
   AxisCommands out_{};
   Eigen::Vector3d ref_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d ref_prev_ = Eigen::Vector3d::Zero();
-  Eigen::Vector3d act_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d eps_ = Eigen::Vector3d::Zero();
   std::array<double, 3> v_cmd_{};
-  ProgramJob* job_ = nullptr;
-  control::InterpOutput iout_{};
-  control::PlannedSegment seg_{};
   double feed_override_ = 1.0;
-  bool stopping_ = false;       // stop requested: decelerate, then flush
-  bool underrun_ = false;
-  bool settling_ = false;       // interpolator done, waiting for the tool to arrive
-  std::uint64_t settle_cycles_ = 0;
-  bool jogging_ = false;
-  int jog_axis_ = 0;
-  double jog_target_mm_ = 0.0;
-  double jog_v_mm_s_ = 0.0;
-  double jog_speed_mm_s_ = 0.0;
   bool recording_ = false;
-  std::array<int, 3> missed_streak_{};
   int fault_axis_ = -1;
   double fault_value_ = 0.0, fault_limit_ = 0.0;
   std::uint64_t finished_job_ = 0, released_job_ = 0, finished_cycle_ = 0;
   bool finished_ok_ = false;
-  std::uint64_t underruns_ = 0, missed_tpdos_ = 0, clamps_ = 0;
+  std::uint64_t missed_tpdos_ = 0, clamps_ = 0;
   std::uint64_t gains_generation_ = 0, gains_cycle_ = 0;
 
   // Seqlock-published status.

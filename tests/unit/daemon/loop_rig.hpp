@@ -48,7 +48,7 @@ struct Rig {
     return loop.status().state == MachineState::kReady;
   }
   std::shared_ptr<ProgramJob> load(const std::string& text, std::uint64_t id) {
-    ProgramSource src{"<test>", "", text};
+    ProgramText src{"<test>", "", text};
     const auto st = loop.status();
     const Eigen::Vector3d start(st.ref_mm[0], st.ref_mm[1], st.ref_mm[2]);
     planner.validate(src, start);

@@ -1,0 +1,224 @@
+#include "daemon/reference_sources.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace contour::daemon {
+
+const char* to_string(SourceKind k) noexcept {
+  switch (k) {
+    case SourceKind::kProgram: return "program";
+    case SourceKind::kJog: return "jog";
+    case SourceKind::kHold: return "hold";
+    case SourceKind::kStop: return "stop";
+  }
+  return "?";
+}
+
+// ---------------------------------------------------------------------------------------------
+// ProgramSource
+
+void ProgramSource::attach(ProgramJob* job) noexcept {
+  job_ = job;
+  settling_ = stopping_ = underrun_ = false;
+}
+
+ProgramJob* ProgramSource::detach(bool ok) noexcept {
+  ProgramJob* j = job_;
+  if (j == nullptr) return nullptr;
+  if (!ok) j->abort.store(true, std::memory_order_release);
+  job_ = nullptr;
+  stopping_ = false;
+  settling_ = false;
+  underrun_ = false;
+  return j;
+}
+
+void ProgramSource::start() noexcept { iout_ = control::InterpOutput{}; }
+
+void ProgramSource::request_stop() noexcept {
+  if (job_ == nullptr) return;
+  stopping_ = true;
+  job_->abort.store(true, std::memory_order_release);
+}
+
+void ProgramSource::resume() noexcept {
+  if (job_ != nullptr) job_->interp.resume();
+}
+
+void ProgramSource::drain() noexcept {
+  if (job_ == nullptr) return;
+  SegmentRecord rec;
+  for (int n = 0; n < kMaxSegmentsPerCycle && job_->interp.free_slots() > 0 && job_->queue.pop(rec);
+       ++n) {
+    from_record(rec, seg_);
+    job_->interp.push(seg_);
+  }
+}
+
+double ProgramSource::programmed_spindle_rpm() const noexcept {
+  switch (iout_.spindle) {
+    case control::SpindleDir::kCw: return iout_.spindle_rpm;
+    case control::SpindleDir::kCcw: return -iout_.spindle_rpm;
+    case control::SpindleDir::kOff: break;
+  }
+  return 0.0;
+}
+
+RefPoint ProgramSource::step(const Inputs& in, ProgramStep& out) noexcept {
+  using control::InterpStatus;
+  out = ProgramStep{};
+  // HOLD and stop decelerate along the path: the interpolator ramps its override to 0.
+  const double ovr = (in.running && !stopping_) ? in.override_ratio : 0.0;
+  const InterpStatus ist = job_->interp.step(ovr, iout_);
+  out.status = ist;
+  RefPoint r;
+  r.source = SourceKind::kProgram;
+  r.position_mm = iout_.position_mm;
+  r.track = true;
+  r.drives_on = true;
+
+  const bool planner_done = job_->planner_done.load(std::memory_order_acquire);
+  if (ist == InterpStatus::kStarved && !planner_done) {
+    if (!underrun_) {
+      underrun_ = true;
+      ++underruns_;
+      out.underrun_begin = true;
+    }
+  } else if (underrun_ && ist == InterpStatus::kRunning) {
+    underrun_ = false;
+    out.underrun_end = true;
+  }
+  if (job_->planner_failed.load(std::memory_order_acquire) && !stopping_) {
+    stopping_ = true;
+    out.planner_failed = true;
+  }
+  if (ist == InterpStatus::kHolding && in.running) out.program_hold = true;  // M0/M1/M6
+
+  // A feed move after a spindle start / speed change (the planner's kSpindleSync marker): the
+  // path waits at its exact stop while the marker's speed is commanded until the spindle is at
+  // speed; the supervisor ends a wait that lasts too long (check_spindle_wait).
+  const bool was_waiting = spindle_waiting_;
+  spindle_waiting_ = false;
+  if (ist == InterpStatus::kSpindleWait && !stopping_) {
+    if (!in.wait_for_spindle) {
+      job_->interp.resume();
+    } else if (in.running) {
+      if (!was_waiting) spindle_wait_cycles_ = 0;
+      spindle_waiting_ = true;
+      // Judged on the target of the marker (the ramp and the feedback of the previous cycle must
+      // both be there): at-speed of an older target does not count.
+      const double target = drivers::clamp_spindle_rpm(programmed_spindle_rpm(), spindle_limits_);
+      if (in.spindle_at_speed && target == in.spindle_target_rpm) {
+        spindle_waiting_ = false;
+        ++spindle_waits_;
+        spindle_last_wait_s_ = static_cast<double>(spindle_wait_cycles_) * period_s_;
+        job_->interp.resume();
+        out.spindle_at_speed = true;
+      } else {
+        ++spindle_wait_cycles_;
+        out.spindle_waiting = true;
+      }
+    }
+  }
+
+  const bool stationary = iout_.override_applied <= 0.0 || ist == InterpStatus::kSpindleWait ||
+                          ist == InterpStatus::kHolding || ist == InterpStatus::kStarved ||
+                          ist == InterpStatus::kDone;
+  if (stopping_ && stationary) {
+    out.stopped = true;
+  } else if (ist == InterpStatus::kDone ||
+             (ist == InterpStatus::kStarved && planner_done && job_->queue.size() == 0)) {
+    if (!settling_) {
+      settling_ = true;
+      settle_cycles_ = 0;
+    }
+  }
+  return r;
+}
+
+bool ProgramSource::settled(const Eigen::Vector3d& ref_mm, const Eigen::Vector3d& act_mm,
+                            int axes) noexcept {
+  ++settle_cycles_;
+  double err = 0.0;
+  for (int i = 0; i < axes; ++i) err = std::max(err, std::abs(ref_mm[i] - act_mm[i]));
+  return err < kInPositionMm || static_cast<double>(settle_cycles_) * period_s_ > kSettleTimeoutS;
+}
+
+// ---------------------------------------------------------------------------------------------
+// JogSource
+
+void JogSource::start(int axis, double velocity_mm_s, double target_mm) noexcept {
+  active_ = true;
+  axis_ = axis;
+  v_mm_s_ = velocity_mm_s;
+  speed_mm_s_ = 0.0;
+  target_mm_ = target_mm;
+}
+
+void JogSource::brake(double ref_axis_mm, double decel_mm_s2) noexcept {
+  if (!active_) return;
+  const double dir = target_mm_ >= ref_axis_mm ? 1.0 : -1.0;
+  target_mm_ = ref_axis_mm + dir * speed_mm_s_ * speed_mm_s_ / (2.0 * decel_mm_s2);
+}
+
+RefPoint JogSource::step(const Eigen::Vector3d& ref_mm, const LiveLimits& lim, double period_s) noexcept {
+  RefPoint r;
+  r.source = SourceKind::kJog;
+  r.position_mm = ref_mm;
+  r.track = true;
+  r.drives_on = true;
+  if (!active_) return r;
+  const auto a = static_cast<std::size_t>(axis_);
+  const double acc = lim.max_accel_mm_s2[a];
+  const double rem = target_mm_ - ref_mm[axis_];
+  const double dir = rem >= 0.0 ? 1.0 : -1.0;
+  const double v_brake = std::sqrt(2.0 * acc * std::abs(rem));
+  const double v_des = std::min({v_mm_s_, v_brake, lim.max_velocity_mm_s[a]});
+  speed_mm_s_ = std::min(v_des, speed_mm_s_ + acc * period_s);
+  const double step = std::min(speed_mm_s_ * period_s, std::abs(rem));
+  r.position_mm[axis_] += dir * step;
+  if (std::abs(target_mm_ - r.position_mm[axis_]) < 1e-9) {
+    r.position_mm[axis_] = target_mm_;
+    active_ = false;
+  }
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------
+// HoldSource
+
+RefPoint HoldSource::step(const Feedback& fb, bool servo) noexcept {
+  RefPoint r;
+  r.source = SourceKind::kHold;
+  if (!servo) held_mm_ = fb.act_mm;
+  r.position_mm = held_mm_;
+  r.track = servo;
+  r.drives_on = servo;
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------
+// StopSource
+
+RefPoint StopSource::step(const Feedback& fb, const std::array<double, kMaxAxes>& v_cmd_prev_mm_s,
+                          double stop_decel_mm_s2, double period_s, int axes) noexcept {
+  RefPoint r;
+  r.source = SourceKind::kStop;
+  r.position_mm = fb.act_mm;
+  r.track = false;
+  double speed = 0.0;
+  for (int i = 0; i < axes; ++i) {
+    const double v = v_cmd_prev_mm_s[static_cast<std::size_t>(i)];
+    speed += v * v;
+  }
+  speed = std::sqrt(speed);
+  const double next = std::max(0.0, speed - stop_decel_mm_s2 * period_s);
+  const double scale = speed > 0.0 ? next / speed : 0.0;
+  for (std::size_t i = 0; i < r.velocity_mm_s.size(); ++i) r.velocity_mm_s[i] = v_cmd_prev_mm_s[i] * scale;
+  r.drives_on = next > 0.0;
+  done_ = !r.drives_on;
+  return r;
+}
+
+}  // namespace contour::daemon

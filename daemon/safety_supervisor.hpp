@@ -1,0 +1,92 @@
+#pragma once
+// Every safety rule of the servo loop in one place (the `supervise` stage, and the rules other
+// stages consult at the instant they apply: the E-stop input, the spindle at-speed timeout, the
+// stale force sample). A rule returns a FaultReport (cause, axis, value, limit); the loop latches
+// the first one into the state machine (StateMachine::fault / estop keep the first cause) and
+// starts the controlled stop. The reset rule lives here too: a reset is accepted only when every
+// cause is gone.
+//
+// Pure logic over the Feedback snapshot: noexcept, no allocation, no lock, no I/O. Units in the
+// names (mm, mm/s, s, rpm).
+#include <array>
+#include <cstdint>
+
+#include <Eigen/Core>
+
+#include "config/config.hpp"
+#include "daemon/loop_stages.hpp"
+#include "daemon/machine_state.hpp"
+
+namespace contour::daemon {
+
+// Safety limits that may change live (SIGHUP, swapped like the gains). Units in the names.
+struct LiveLimits {
+  double ferror_mm = 1.0;
+  double min_ferror_mm = 0.1;
+  double contour_error_limit_mm = 0.5;
+  double stop_decel_mm_s2 = 1000.0;
+  std::array<double, 3> max_velocity_mm_s{};
+  std::array<double, 3> max_accel_mm_s2{};
+};
+LiveLimits live_limits_from(const config::Config& cfg);
+// Throws std::invalid_argument naming the field (non-finite, <= 0, min_ferror > ferror).
+void validate(const LiveLimits& l, int axes);
+
+struct FaultReport {
+  FaultCause cause = FaultCause::kNone;
+  int axis = -1;  // -1: not an axis (spindle, bus, contour); heartbeat: the node-id
+  double value = 0.0;
+  double limit = 0.0;
+  explicit operator bool() const noexcept { return cause != FaultCause::kNone; }
+};
+
+class SafetySupervisor {
+ public:
+  SafetySupervisor() = default;
+  // Setup: axes, soft limits, missed-TPDO streak, timeouts. force_stale_faults: a stale force
+  // sample is a FAULT (LoopOptions, from `force.fallback: fault`).
+  SafetySupervisor(const config::Config& cfg, bool force_stale_faults);
+
+  // E-stop input latch (RtIo): ESTOP in the cycle it is seen.
+  [[nodiscard]] FaultReport check_estop(const Feedback& fb) const noexcept;
+
+  // Bus and drive rules, in every state but DISABLED/FAULT/ESTOP, first match wins, per axis in
+  // order: drive fault bit; a drive that left operation enabled without a fault while the axes
+  // servo (`servo`); a missed-TPDO streak >= safety.missed_tpdo_streak. Then the spindle drive's
+  // fault, heartbeat loss (axis = node-id), bus error.
+  [[nodiscard]] FaultReport check_bus(const Feedback& fb, bool servo) const noexcept;
+
+  // Motion rules while the axes servo, first match wins: per axis the following error against
+  // LinuxCNC's band (MIN_FERROR at standstill growing linearly to FERROR at max velocity with the
+  // reference speed |v_ref|) and the soft limits on the reference; then the model contour error.
+  [[nodiscard]] FaultReport check_motion(const Eigen::Vector3d& ref_mm, const Eigen::Vector3d& act_mm,
+                                         const Eigen::Vector3d& v_ref_mm_s, double eps_norm_mm,
+                                         const LiveLimits& lim) const noexcept;
+
+  // A feed move that waited `waited_cycles` for the spindle: FAULT "spindle not at speed" past
+  // spindle.at_speed_timeout_s (value: actual rpm, limit: target rpm).
+  [[nodiscard]] FaultReport check_spindle_wait(std::int64_t waited_cycles, double actual_rpm,
+                                               double target_rpm) const noexcept;
+
+  // A stale/invalid force sample while force control is on: a FAULT only with
+  // `force.fallback: fault` (otherwise the force channel's fallback handles it).
+  [[nodiscard]] FaultReport check_force_stale(bool fallback_now, double age_s,
+                                              double stale_age_s) const noexcept;
+
+  // Reset rule: every cause that latched a FAULT/ESTOP is gone in this snapshot (no heartbeat
+  // loss, no bus error, E-stop input released, no drive or spindle fault bit).
+  [[nodiscard]] bool causes_gone(const Feedback& fb, bool estop_tripped) const noexcept;
+
+  [[nodiscard]] int axes() const noexcept { return axes_; }
+
+ private:
+  int axes_ = 3;
+  double period_s_ = 0.001;
+  std::array<double, 3> min_mm_{-1e300, -1e300, -1e300};
+  std::array<double, 3> max_mm_{1e300, 1e300, 1e300};
+  int missed_tpdo_streak_ = 5;
+  double spindle_timeout_s_ = 10.0;
+  bool force_stale_faults_ = false;
+};
+
+}  // namespace contour::daemon
