@@ -6,8 +6,10 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <thread>
 
+#include "daemon/command_table.hpp"
 #include "daemon/commands.hpp"
 #include "daemon/daemon.hpp"
 
@@ -20,26 +22,6 @@ using nlohmann::json;
 const json& arg(const json& req, const char* key) {
   if (!req.contains(key)) throw CommandError(std::string("missing argument '") + key + "'");
   return req.at(key);
-}
-
-double number_arg(const json& req, const char* key, double lo, double hi) {
-  const json& v = arg(req, key);
-  if (!v.is_number()) throw CommandError(std::string("argument '") + key + "' must be a number");
-  const double x = v.get<double>();
-  if (!std::isfinite(x) || x < lo || x > hi) {
-    throw CommandError(std::string("argument '") + key + "' = " + std::to_string(x) +
-                       " out of range [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
-  }
-  return x;
-}
-
-void only_keys(const json& req, std::initializer_list<const char*> keys) {
-  for (auto it = req.begin(); it != req.end(); ++it) {
-    if (it.key() == "id" || it.key() == "cmd") continue;
-    bool ok = false;
-    for (const char* k : keys) ok = ok || it.key() == k;
-    if (!ok) throw CommandError("unknown argument '" + it.key() + "'");
-  }
 }
 
 json arr3(const std::array<double, 3>& a, int axes) {
@@ -236,7 +218,6 @@ json Daemon::gpio_json() {
 }
 
 json Daemon::cmd_force(const json& req) {
-  only_keys(req, {"enable", "action", "reference_N", "reference_n"});
   if (!loop_->force_configured()) {
     throw CommandError("force: no force source (configure the `dynamometer:` section)");
   }
@@ -256,10 +237,7 @@ json Daemon::cmd_force(const json& req) {
   }
   double ref = std::nan("");
   for (const char* k : {"reference_N", "reference_n"}) {
-    if (req.contains(k)) {
-      // Keep below the force ceiling: a reference at or above it would hold the feed at once.
-      ref = number_arg(req, k, 0.0, cfg_.force.limits.force_ceiling_N);
-    }
+    if (req.contains(k)) ref = req.at(k).get<double>();  // range: Bound::kForceReference
   }
   if (on < 0 && std::isnan(ref)) {
     return force_json();  // query
@@ -274,7 +252,6 @@ json Daemon::cmd_force(const json& req) {
 }
 
 json Daemon::cmd_sim_gpio(const json& req) {
-  only_keys(req, {"line", "level"});
   if (!io_ || io_->sim_gpio() == nullptr) {
     throw CommandError("sim_gpio: only with `gpio.backend: sim`");
   }
@@ -346,14 +323,13 @@ void Daemon::free_released_jobs() {
 }
 
 json Daemon::cmd_load(const json& req) {
-  only_keys(req, {"path", "program", "name"});
   const auto st = loop_->status();
   if (st.state != MachineState::kReady) {
     throw CommandError(std::string("load is not allowed in state ") + std::string(to_string(st.state)) +
                        " (needs READY)");
   }
   if (st.jogging) throw CommandError("load is not allowed while jogging");
-  ProgramSource src;
+  ProgramText src;
   if (req.contains("path") == req.contains("program")) {
     throw CommandError("load needs exactly one of 'path' (file on the daemon's host) or 'program' (text)");
   }
@@ -408,7 +384,6 @@ json Daemon::cmd_load(const json& req) {
 }
 
 json Daemon::cmd_gains(const json& req) {
-  only_keys(req, {"set", "op"});
   auto params_json = [this]() {
     const control::ServoParams p = loop_->active_params();
     json kp = json::array(), ki = json::array(), kd = json::array(), ff = json::array();
@@ -500,10 +475,9 @@ json Daemon::cmd_gains(const json& req) {
 }
 
 json Daemon::cmd_jog(const json& req) {
-  only_keys(req, {"axis", "velocity_mm_min", "distance_mm"});
-  const int axis = axis_index(arg(req, "axis"), cfg_.machine);
-  const double v = number_arg(req, "velocity_mm_min", 1e-3, cfg_.safety.jog_max_velocity_mm_min);
-  const double d = number_arg(req, "distance_mm", -1e4, 1e4);
+  const int axis = axis_index(req.at("axis"), cfg_.machine);
+  const double v = req.at("velocity_mm_min").get<double>();  // ranges: the command table
+  const double d = req.at("distance_mm").get<double>();
   if (d == 0.0) throw CommandError("argument 'distance_mm' must not be 0");
   const auto st = loop_->status();
   if (st.state != MachineState::kReady || st.attached_job != 0 || st.jogging) {
@@ -522,10 +496,9 @@ json Daemon::cmd_jog(const json& req) {
 }
 
 json Daemon::cmd_set_position(const json& req) {
-  only_keys(req, {"axis", "position_mm"});
-  const int axis = axis_index(arg(req, "axis"), cfg_.machine);
+  const int axis = axis_index(req.at("axis"), cfg_.machine);
   const auto& ax = cfg_.machine.axes[static_cast<std::size_t>(axis)];
-  const double pos = number_arg(req, "position_mm", ax.min_mm, ax.max_mm);
+  const double pos = req.at("position_mm").get<double>();  // range: Bound::kAxisPosition
   const auto st = loop_->status();
   if ((st.state != MachineState::kReady && st.state != MachineState::kDisabled) || st.attached_job != 0 ||
       st.jogging) {
@@ -545,7 +518,6 @@ json Daemon::cmd_set_position(const json& req) {
 }
 
 json Daemon::cmd_record(const json& req) {
-  only_keys(req, {"action", "path"});
   const json& a = arg(req, "action");
   if (!a.is_string()) throw CommandError("argument 'action' must be \"start\" or \"stop\"");
   if (a == "start") {
@@ -568,123 +540,125 @@ json Daemon::cmd_record(const json& req) {
   throw CommandError("argument 'action' must be \"start\" or \"stop\"");
 }
 
+std::pair<double, double> Daemon::bound(Bound b, const json& req) const {
+  switch (b) {
+    case Bound::kStatic: break;
+    case Bound::kJogVelocity: return {1e-3, cfg_.safety.jog_max_velocity_mm_min};
+    case Bound::kAxisPosition: {
+      const auto& ax = cfg_.machine.axes[static_cast<std::size_t>(axis_index(req.at("axis"), cfg_.machine))];
+      return {ax.min_mm, ax.max_mm};
+    }
+    case Bound::kOverridePercent: return {0.0, cfg_.interpolator.feed_override_max_percent};
+    case Bound::kForceReference:
+      // Keep below the force ceiling: a reference at or above it would hold the feed at once.
+      return {0.0, cfg_.force.limits.force_ceiling_N};
+  }
+  return {-std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+}
+
+// Dispatch from the command table (daemon/command_table.hpp): arguments and (for gated
+// commands) the state are checked from the table before the handler runs.
 json Daemon::handle(const json& req, const ClientInfo& client) {
   const std::string cmd = req.at("cmd").get<std::string>();
-  auto state_name = [this]() { return std::string(to_string(loop_->status().state)); };
-  auto simple = [&](CommandKind k, std::initializer_list<MachineState> allowed) -> json {
-    only_keys(req, {});
+  const CommandSpec* spec = find_command(cmd);
+  if (spec == nullptr) throw CommandError("unknown command '" + cmd + "'");
+  validate_request(*spec, req, [this](Bound b, const json& r) { return bound(b, r); });
+  check_state(*spec, loop_->status().state);
+  auto simple = [&](CommandKind k) -> json {
     const auto st = loop_->status();
-    bool ok = false;
-    for (auto s : allowed) ok = ok || st.state == s;
-    if (!ok) throw CommandError(cmd + " is not allowed in state " + state_name());
     const MachineState now = post_and_wait({k}, st.state, 1.0);
     if (now == st.state && k != CommandKind::kEnable) {
       throw CommandError(cmd + " refused by the loop in state " + std::string(to_string(now)));
     }
     return status_json();
   };
+  auto state_name = [this]() { return std::string(to_string(loop_->status().state)); };
   using S = MachineState;
-  if (cmd == "status") {
-    only_keys(req, {});
-    return status_json();
-  }
-  if (cmd == "load") return cmd_load(req);
-  if (cmd == "run") {
-    only_keys(req, {"path", "program", "name"});
-    if (req.contains("path") || req.contains("program")) cmd_load(req);
-    const auto st = loop_->status();
-    if (st.state != S::kReady) throw CommandError("run is not allowed in state " + state_name());
-    if (st.attached_job == 0) throw CommandError("run: no program loaded (load one first)");
-    const std::uint64_t job = st.attached_job;
-    {
-      std::lock_guard lk(jobs_mu_);
-      jobs_[job].overruns_at_start = loop_->stats().overruns.load();
+  switch (spec->id) {
+    case CommandId::kStatus: return status_json();
+    case CommandId::kLoad: return cmd_load(req);
+    case CommandId::kRun: {
+      if (req.contains("path") || req.contains("program")) cmd_load(req);
+      const auto st = loop_->status();
+      if (st.state != S::kReady) throw CommandError("run is not allowed in state " + state_name());
+      if (st.attached_job == 0) throw CommandError("run: no program loaded (load one first)");
+      const std::uint64_t job = st.attached_job;
+      {
+        std::lock_guard lk(jobs_mu_);
+        jobs_[job].overruns_at_start = loop_->stats().overruns.load();
+      }
+      const MachineState now = post_and_wait({CommandKind::kRun}, st.state, 1.0);
+      if (now != S::kRunning && loop_->status().finished_job != job) {
+        throw CommandError("run refused by the loop (state " + std::string(to_string(now)) + ")");
+      }
+      return {{"job", job}, {"state", to_string(now)}};
     }
-    const MachineState now = post_and_wait({CommandKind::kRun}, st.state, 1.0);
-    if (now != S::kRunning && loop_->status().finished_job != job) {
-      throw CommandError("run refused by the loop (state " + std::string(to_string(now)) + ")");
+    case CommandId::kResult: return result_json(req.at("job").get<std::uint64_t>());
+    case CommandId::kHold: return simple(CommandKind::kHold);
+    case CommandId::kResume: return simple(CommandKind::kResume);
+    case CommandId::kStop: {
+      const auto st = loop_->status();
+      if (st.state != S::kRunning && st.state != S::kHold && !st.jogging && st.attached_job == 0) {
+        throw CommandError("stop: nothing to stop in state " + state_name());
+      }
+      loop_->post({CommandKind::kStop});
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+      while (std::chrono::steady_clock::now() < until) {
+        const auto s = loop_->status();
+        if (s.cycle > st.cycle + 2 && s.state != S::kRunning && s.state != S::kHold && !s.jogging) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      }
+      loaded_job_ = 0;
+      return status_json();
     }
-    return {{"job", job}, {"state", to_string(now)}};
-  }
-  if (cmd == "hold") return simple(CommandKind::kHold, {S::kRunning});
-  if (cmd == "resume") return simple(CommandKind::kResume, {S::kHold});
-  if (cmd == "stop") {
-    only_keys(req, {});
-    const auto st = loop_->status();
-    if (st.state != S::kRunning && st.state != S::kHold && !st.jogging && st.attached_job == 0) {
-      throw CommandError("stop: nothing to stop in state " + state_name());
+    case CommandId::kEstop:
+      post_and_wait({CommandKind::kEstop}, loop_->status().state, 0.5);
+      spdlog::warn("E-STOP from socket client pid {} uid {}", client.pid, client.uid);
+      loaded_job_ = 0;
+      return status_json();
+    case CommandId::kReset: {
+      const auto st = loop_->status();
+      if (st.state != S::kFault && st.state != S::kEstop) {
+        throw CommandError("reset is only for FAULT or ESTOP (state " + state_name() + ")");
+      }
+      if (io_ && !io_->reset_estop()) {
+        throw CommandError("reset refused: the E-stop input is still asserted (release it first)");
+      }
+      const MachineState now = post_and_wait({CommandKind::kReset}, st.state, 1.0);
+      if (now == S::kFault || now == S::kEstop) {
+        throw CommandError("reset refused: the cause (" + std::string(to_string(st.cause)) + ") is still present");
+      }
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+      while (loop_->status().state != S::kReady && std::chrono::steady_clock::now() < until) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      return status_json();
     }
-    loop_->post({CommandKind::kStop});
-    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (std::chrono::steady_clock::now() < until) {
-      const auto s = loop_->status();
-      if (s.cycle > st.cycle + 2 && s.state != S::kRunning && s.state != S::kHold && !s.jogging) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    case CommandId::kEnable: return simple(CommandKind::kEnable);
+    case CommandId::kDisable: return simple(CommandKind::kDisable);
+    case CommandId::kJog: return cmd_jog(req);
+    case CommandId::kSetPosition:
+    case CommandId::kHome: return cmd_set_position(req);
+    case CommandId::kGains: return cmd_gains(req);
+    case CommandId::kOverride: {
+      const double pct = req.at("percent").get<double>();
+      loop_->post({CommandKind::kSetOverride, 0, pct / 100.0, 0.0});
+      return {{"feed_override_percent", pct}};
     }
-    loaded_job_ = 0;
-    return status_json();
-  }
-  if (cmd == "estop") {
-    only_keys(req, {});
-    post_and_wait({CommandKind::kEstop}, loop_->status().state, 0.5);
-    spdlog::warn("E-STOP from socket client pid {} uid {}", client.pid, client.uid);
-    loaded_job_ = 0;
-    return status_json();
-  }
-  if (cmd == "reset") {
-    only_keys(req, {});
-    const auto st = loop_->status();
-    if (st.state != S::kFault && st.state != S::kEstop) {
-      throw CommandError("reset is only for FAULT or ESTOP (state " + state_name() + ")");
+    case CommandId::kRecord: return cmd_record(req);
+    case CommandId::kSubscribe:
+    case CommandId::kUnsubscribe: {
+      const std::string topic = req.at("topic").get<std::string>();
+      if (spec->id == CommandId::kSubscribe) server_->subscribe(client.id, topic);
+      else server_->unsubscribe(client.id, topic);
+      return {{"topic", topic}};
     }
-    if (io_ && !io_->reset_estop()) {
-      throw CommandError("reset refused: the E-stop input is still asserted (release it first)");
-    }
-    const MachineState now = post_and_wait({CommandKind::kReset}, st.state, 1.0);
-    if (now == S::kFault || now == S::kEstop) {
-      throw CommandError("reset refused: the cause (" + std::string(to_string(st.cause)) + ") is still present");
-    }
-    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
-    while (loop_->status().state != S::kReady && std::chrono::steady_clock::now() < until) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    }
-    return status_json();
-  }
-  if (cmd == "enable") return simple(CommandKind::kEnable, {S::kDisabled});
-  if (cmd == "disable") return simple(CommandKind::kDisable, {S::kReady, S::kEnabling});
-  if (cmd == "jog") return cmd_jog(req);
-  if (cmd == "set-position" || cmd == "home") return cmd_set_position(req);
-  if (cmd == "gains") return cmd_gains(req);
-  if (cmd == "override") {
-    only_keys(req, {"percent"});
-    const double pct = number_arg(req, "percent", 0.0, cfg_.interpolator.feed_override_max_percent);
-    loop_->post({CommandKind::kSetOverride, 0, pct / 100.0, 0.0});
-    return {{"feed_override_percent", pct}};
-  }
-  if (cmd == "record") return cmd_record(req);
-  if (cmd == "result") {
-    only_keys(req, {"job"});
-    const json& j = arg(req, "job");
-    if (!j.is_number_unsigned()) throw CommandError("argument 'job' must be a job number");
-    return result_json(j.get<std::uint64_t>());
-  }
-  if (cmd == "subscribe" || cmd == "unsubscribe") {
-    only_keys(req, {"topic"});
-    const json& t = arg(req, "topic");
-    if (!t.is_string() || (t != "telemetry" && t != "events")) {
-      throw CommandError("argument 'topic' must be \"telemetry\" or \"events\"");
-    }
-    if (cmd == "subscribe") server_->subscribe(client.id, t.get<std::string>());
-    else server_->unsubscribe(client.id, t.get<std::string>());
-    return {{"topic", t}};
-  }
-  if (cmd == "force") return cmd_force(req);
-  if (cmd == "sim_gpio") return cmd_sim_gpio(req);
-  if (cmd == "shutdown") {
-    only_keys(req, {});
-    spdlog::info("shutdown requested by socket client pid {} uid {}", client.pid, client.uid);
-    request_shutdown();
-    return {{"shutting_down", true}};
+    case CommandId::kForce: return cmd_force(req);
+    case CommandId::kSimGpio: return cmd_sim_gpio(req);
+    case CommandId::kShutdown:
+      spdlog::info("shutdown requested by socket client pid {} uid {}", client.pid, client.uid);
+      request_shutdown();
+      return {{"shutting_down", true}};
   }
   throw CommandError("unknown command '" + cmd + "'");
 }

@@ -28,6 +28,7 @@
 #include "config/config.hpp"
 #include "daemon/axis_bus.hpp"
 #include "daemon/command_server.hpp"
+#include "daemon/command_table.hpp"
 #include "daemon/event_log.hpp"
 #include "daemon/io_channels.hpp"
 #include "daemon/planner.hpp"
@@ -85,6 +86,8 @@ class Daemon {
   nlohmann::json cmd_set_position(const nlohmann::json& req);
   nlohmann::json cmd_record(const nlohmann::json& req);
   nlohmann::json cmd_force(const nlohmann::json& req);
+  // A run-time argument range of the command table (the configuration): {lo, hi}.
+  [[nodiscard]] std::pair<double, double> bound(Bound b, const nlohmann::json& req) const;
   nlohmann::json cmd_sim_gpio(const nlohmann::json& req);
   nlohmann::json force_json();
   nlohmann::json gpio_json();

@@ -1,6 +1,7 @@
 // contourd — the real-time servo daemon.
 //   contourd --config FILE [--socket PATH]     run (systemd Type=notify)
 //   contourd --config FILE --check-config      validate, print every error, exit 78 on errors
+//   contourd --protocol                        print the command protocol (daemon/PROTOCOL.md)
 //   contourd --latency-test SECONDS            RT set-up and wake-up lateness without drives
 //   contourd --config FILE --probe modbus|can|gpio [--count N] [--scan]
 //                                              commissioning probe: JSON lines, no loop (probe.hpp)
@@ -10,6 +11,7 @@
 #include <string>
 
 #include "config/config.hpp"
+#include "daemon/command_table.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/latency_test.hpp"
 #include "daemon/probe.hpp"
@@ -40,7 +42,15 @@ int main(int argc, char** argv) {
                  "--probe: samples (modbus, default 10 at the poll rate) or rounds (can, gpio: 1)")
       ->check(CLI::Range(1, 1000000));
   app.add_flag("--scan", probe.scan, "--probe can: also scan node-ids 1..127");
+  bool protocol = false;
+  app.add_flag("--protocol", protocol,
+               "print the command protocol (Markdown, daemon/PROTOCOL.md) from the command table");
   CLI11_PARSE(app, argc, argv);
+
+  if (protocol) {
+    std::fputs(contour::daemon::protocol_markdown().c_str(), stdout);
+    return 0;
+  }
 
   if (latency_s > 0.0) {
     lat.seconds = latency_s;
