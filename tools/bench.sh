@@ -35,7 +35,7 @@ while [ $# -gt 0 ]; do
   shift
 done
 
-benches=(bench_cycle bench_control bench_planner bench_force bench_canopen)
+benches=(bench_cycle bench_loop bench_control bench_planner bench_force bench_canopen)
 if [ "$do_build" = 1 ]; then
   tools/build.sh release "${benches[@]}" >&2
   build_dir=build/release
@@ -113,13 +113,16 @@ window=$(median_ns bench_control BM_WindowUpdate)
 pdo_cycle=$(median_ns bench_canopen BM_PdoCycle3Axis)
 pdo_pack=$(median_ns bench_canopen BM_PdoPack)
 pdo_unpack=$(median_ns bench_canopen BM_PdoUnpack)
+loop_cycle=$(median_ns bench_loop BM_ServoLoopCycle)
 echo "cycle (3 axes, incl. plant ${plant} ns): ${cycle} ns median (target <= 2000 ns)"
+echo "servo loop cycle (every stage, SimBus, Table 2): ${loop_cycle} ns median"
 
 if [ "$json" = 1 ]; then
   printf '{"cycle_ns_median":%s,"contour_model_ns_median":%s,"planner_realtime_factor":%s,"planner_peak_rss_mb":%s,' \
     "${cycle:-null}" "${model:-null}" "${rtf:-null}" "${rss_mb:-null}"
   printf '"plant_ns_median":%s,"contour_model_eq11_ns_median":%s,"window_update_ns_median":%s,' \
     "${plant:-null}" "${model_eq11:-null}" "${window:-null}"
+  printf '"servo_loop_cycle_ns_median":%s,' "${loop_cycle:-null}"
   printf '"pdo_cycle_3axis_ns_median":%s,"pdo_pack_ns_median":%s,"pdo_unpack_ns_median":%s,' \
     "${pdo_cycle:-null}" "${pdo_pack:-null}" "${pdo_unpack:-null}"
   printf '"planner_blocks":%s,"planner_program_s":%s,"planner_wall_s":%s,"planner_path_mm":%s,"planner_feed_time_s":%s,"planner_feed_realtime_factor":%s,' "$blocks" "$program_s" "$wall_s" "$path_mm" "$feed_s" "$feed_rtf"
