@@ -78,6 +78,7 @@ json Daemon::status_json() {
   const auto& h = cs.wake_lateness;
   json j{{"state", to_string(st.state)},
          {"cause", to_string(st.cause)},
+         {"source", to_string(st.source)},
          {"cycle", st.cycle},
          {"ref_mm", arr3(st.ref_mm, axes)},
          {"act_mm", arr3(st.act_mm, axes)},
