@@ -1,20 +1,25 @@
 #!/usr/bin/env bash
 # Builds contourd and runs every test: unit, sim and HIL (HIL under tools/with-vcan, through
 # User-Mode Linux where the host kernel has no vcan). Installs what it needs first.
-#   tools/test.sh [--preset release|ci|dev] [--no-hil] [--with-slow] [--dev-unit]
-# --dev-unit also builds the ASan+UBSan preset and runs the unit tests there.
+#   tools/test.sh [--preset release|ci|dev] [--no-hil] [--with-slow] [--dev-unit] [--o3-unit]
+# --dev-unit also builds the unit tests in the ASan+UBSan preset (dev) and runs them there.
+# --o3-unit also builds the unit tests in CMake's Release build type (-O3: preset ci-o3 with
+# --preset ci, else release-o3) and runs them there: g++ 12 -O3 once miscompiled code that
+# passed at -O2 (issue 17). Both build only the unit-test programs (target tests_unit).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 preset=release
 hil=1
 slow=0
 dev_unit=0
+o3_unit=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --preset) preset=$2; shift 2 ;;
     --no-hil) hil=0; shift ;;
     --with-slow) slow=1; shift ;;
     --dev-unit) dev_unit=1; shift ;;
+    --o3-unit) o3_unit=1; shift ;;
     *) echo "test.sh: unknown option $1" >&2; exit 2 ;;
   esac
 done
@@ -45,9 +50,21 @@ fi
 
 if [ "$dev_unit" = 1 ]; then
   echo "== unit tests, ASan + UBSan (dev preset) =="
-  tools/build.sh dev
+  t=$(date +%s)
+  tools/build.sh dev tests_unit
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
     ctest --test-dir build/dev -L unit --output-on-failure -j "$(nproc)" || status=1
+  echo "test.sh: dev unit tests (build + run) took $(( $(date +%s) - t )) s"
+fi
+
+if [ "$o3_unit" = 1 ]; then
+  o3=release-o3
+  [ "$preset" = ci ] && o3=ci-o3
+  echo "== unit tests, Release -O3 ($o3 preset) =="
+  t=$(date +%s)
+  tools/build.sh "$o3" tests_unit
+  ctest --test-dir "build/$o3" -L unit --output-on-failure -j "$(nproc)" || status=1
+  echo "test.sh: $o3 unit tests (build + run) took $(( $(date +%s) - t )) s"
 fi
 
 echo "test.sh: total $(( $(date +%s) - start )) s, status $status"

@@ -226,11 +226,22 @@ Cia402State drive_transition(Cia402State s, std::uint16_t cw, std::uint16_t prev
 
 // ---- scaling and wrap-around
 // Extends successive 32-bit position readings into a continuous 64-bit count (handles the
-// wrap from 0x7FFFFFFF to 0x80000000 and back). noexcept, O(1).
+// wrap from 0x7FFFFFFF to 0x80000000 and back): each step is the difference of two readings
+// modulo 2^32 taken the shorter way round, -2^31 <= step < 2^31. noexcept, O(1).
+//
+// The difference is formed in uint32_t (well-defined modulo 2^32) and sign-folded in int64_t; no
+// int32_t value is carried from one call to the next. The textbook form, last reading kept as
+// int32_t and step = int32_t(uint32_t(raw) - uint32_t(last)), is valid C++20 and UBSan-clean,
+// but g++ 12.2 (Debian 12) miscompiles it at -O3 (a variant without primed_ even at -O2) when
+// update() is inlined into a loop whose readings are a 64-bit counter truncated to int32: the
+// loop analysis takes the truncated readings for an int32 sequence that never wraps, and value
+// range propagation then folds the stored last reading to its first value, so every step after
+// the wrap is measured from the start. tests/unit/drivers/position_unwrapper_o3_test.cpp keeps
+// those loop shapes (compiled at -O3 in every build) so that form cannot come back unnoticed.
 class PositionUnwrapper {
  public:
   void reset(std::int32_t raw) noexcept {
-    last_raw_ = raw;
+    last_bits_ = static_cast<std::uint32_t>(raw);
     value_ = raw;
     primed_ = true;
   }
@@ -239,17 +250,17 @@ class PositionUnwrapper {
       reset(raw);
       return value_;
     }
-    // Difference modulo 2^32, interpreted as signed: the shortest way round.
-    const auto d = static_cast<std::int32_t>(static_cast<std::uint32_t>(raw) -
-                                             static_cast<std::uint32_t>(last_raw_));
-    value_ += d;
-    last_raw_ = raw;
+    const auto bits = static_cast<std::uint32_t>(raw);
+    const auto step = static_cast<std::int64_t>(bits - last_bits_);  // modulo 2^32: [0, 2^32)
+    value_ += step >= kHalfRangeCounts ? step - 2 * kHalfRangeCounts : step;
+    last_bits_ = bits;
     return value_;
   }
   [[nodiscard]] std::int64_t value() const noexcept { return value_; }
 
  private:
-  std::int32_t last_raw_ = 0;
+  static constexpr std::int64_t kHalfRangeCounts = std::int64_t{1} << 31;
+  std::uint32_t last_bits_ = 0;  // the last reading's 32 bits
   std::int64_t value_ = 0;
   bool primed_ = false;
 };

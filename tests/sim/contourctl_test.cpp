@@ -1,7 +1,8 @@
 // contourctl against the real contourd in sim mode (the built binaries, config/sim.yaml, a
 // temporary socket): the `run --wait --json` contract, `watch --count` non-TTY output, record +
 // plot PNGs, gains set/get round trip and `gains save` reloading, the circle test's estimates of
-// the sim plant, and clear errors without a daemon.
+// the sim plant, global options before or after the command, one-line confirmations of commands
+// that change the machine, and clear errors without a daemon.
 // No wall-clock assertions: the sim bus runs in lockstep, every figure checked is a function of the
 // executed cycles, not of wake-up timing.
 #include <fcntl.h>
@@ -15,6 +16,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -371,6 +373,137 @@ TEST_F(ContourctlTest, CircleTestEstimatesSimPlant) {
   EXPECT_EQ(after["coupling"], before["coupling"]);
 }
 
+std::string joined(const std::vector<std::string>& args) {
+  std::string s;
+  for (const auto& a : args) s += (s.empty() ? "" : " ") + a;
+  return s;
+}
+
+// Issue 17: --json and --socket work before and after the subcommand, for subcommands with
+// positionals and options of their own too; both forms give the same output.
+TEST_F(ContourctlTest, GlobalOptionsBeforeOrAfterTheCommand) {
+  struct Form {
+    std::vector<std::string> before, after;  // without kCtl
+    const char* key;                         // a key the JSON reply must carry
+  };
+  const std::vector<Form> forms{
+      {{"--socket", sock_, "--json", "status"}, {"status", "--json", "--socket", sock_}, "timing"},
+      {{"--json", "--socket", sock_, "status"}, {"status", "--socket", sock_, "--json"}, "timing"},
+      {{"--socket", sock_, "--json", "gains", "get"}, {"gains", "get", "--json", "--socket", sock_},
+       "kp"},
+      {{"--socket", sock_, "--json", "override", "100"},
+       {"override", "100", "--socket", sock_, "--json"},
+       "feed_override_percent"},
+      {{"--socket", sock_, "--json", "watch", "--count", "1"},
+       {"watch", "--json", "--count", "1", "--socket", sock_},
+       "act_mm"},
+  };
+  for (const auto& f : forms) {
+    std::vector<json> replies;
+    for (const auto* args : {&f.before, &f.after}) {
+      std::vector<std::string> a{kCtl};
+      a.insert(a.end(), args->begin(), args->end());
+      const Proc p = run_proc(a, dir_);
+      ASSERT_EQ(p.rc, 0) << joined(*args) << ": " << p.out << p.err;
+      const auto l = lines_of(p.out);
+      ASSERT_EQ(l.size(), 1u) << joined(*args) << ": " << p.out;
+      const json j = json::parse(l[0], nullptr, false);
+      ASSERT_TRUE(j.is_object()) << joined(*args) << ": " << p.out;
+      EXPECT_TRUE(j.contains(f.key)) << joined(*args) << ": " << p.out;
+      replies.push_back(j);
+    }
+    // The same keys either way (values such as the cycle count move on between the calls).
+    std::vector<std::string> k0, k1;
+    for (auto it = replies[0].begin(); it != replies[0].end(); ++it) k0.push_back(it.key());
+    for (auto it = replies[1].begin(); it != replies[1].end(); ++it) k1.push_back(it.key());
+    EXPECT_EQ(k0, k1) << joined(f.before) << " vs " << joined(f.after);
+  }
+  // Text output with --socket after the command, and the JSON summary of run --wait with --json
+  // last (the README's `run --wait --json`).
+  const Proc t = run_proc({kCtl, "status", "--socket", sock_}, dir_);
+  ASSERT_EQ(t.rc, 0) << t.err;
+  EXPECT_NE(t.out.find("\nstate: READY\n"), std::string::npos) << t.out;
+  const Proc r = run_proc({kCtl, "run", kProgram, "--wait", "--quiet", "--socket", sock_, "--json"},
+                          dir_);
+  ASSERT_EQ(r.rc, 0) << r.out << r.err;
+  ASSERT_EQ(lines_of(r.out).size(), 1u) << r.out;
+  EXPECT_EQ(last_json(r).value("completed", false), true) << r.out;
+  // Options still belong where they are defined: an unknown one is a usage error either way.
+  EXPECT_EQ(run_proc({kCtl, "status", "--socket", sock_, "--bogus"}, dir_).rc, 2);
+  EXPECT_EQ(run_proc({kCtl, "--socket", sock_, "--wait", "status"}, dir_).rc, 2);
+}
+
+// Issue 15: commands that change the machine answer with one short line; --json still prints the
+// daemon's whole reply (for hold & co. the full status object).
+TEST_F(ContourctlTest, ShortConfirmationInsteadOfStatus) {
+  auto line = [](const Proc& p) {
+    const auto l = lines_of(p.out);
+    return l.size() == 1 ? l[0] : std::to_string(l.size()) + " lines:\n" + p.out + p.err;
+  };
+  auto wait_state = [](const std::string& want) {
+    json st;
+    for (int i = 0; i < 1000; ++i) {
+      st = last_json(ctl({"--json", "status"}));
+      if (st.value("state", "") == want && !st.value("jogging", true)) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return st;
+  };
+  ASSERT_EQ(wait_state("READY").value("state", ""), "READY");
+
+  EXPECT_EQ(line(ctl({"override", "25"})), "override: feed 25 %");
+  const json o = last_json(ctl({"--json", "override", "25"}));
+  EXPECT_DOUBLE_EQ(o.value("feed_override_percent", 0.0), 25.0) << o.dump();
+
+  // hold / resume / stop on a running program (at 25 % feed so that it is still running).
+  ASSERT_EQ(ctl({"run", kProgram}).rc, 0);
+  bool running = false;
+  for (int i = 0; i < 1000 && !running; ++i) {
+    const json st = last_json(ctl({"--json", "status"}));
+    running = st.value("state", "") == "RUNNING" && st.value("progress_mm", 0.0) > 0.5;
+    if (!running) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(running) << "program did not start";
+  EXPECT_EQ(line(ctl({"hold"})), "hold: state HOLD");
+  const json rj = last_json(ctl({"--json", "resume"}));
+  EXPECT_EQ(rj.value("state", ""), "RUNNING") << rj.dump();
+  EXPECT_TRUE(rj.contains("timing") && rj.contains("act_mm"))
+      << "not the whole status: " << rj.dump();
+  const std::string stop = line(ctl({"stop"}));
+  EXPECT_EQ(stop.rfind("stop: state ", 0), 0u) << stop;
+  EXPECT_EQ(line(ctl({"override", "100"})), "override: feed 100 %");
+
+  // jog and set-position: the axis and where it goes.
+  json st = wait_state("READY");
+  ASSERT_EQ(st.value("state", ""), "READY") << st.dump();
+  const double x0 = st["ref_mm"][0].get<double>();
+  char want[96];
+  std::snprintf(want, sizeof want, "jog: X to %.3f mm", x0 + 1.0);
+  EXPECT_EQ(line(ctl({"jog", "X", "600", "1"})), want);
+  ASSERT_EQ(wait_state("READY").value("state", ""), "READY");
+  const json jj = last_json(ctl({"jog", "X", "600", "-1", "--json"}));
+  EXPECT_EQ(jj.value("axis", ""), "X") << jj.dump();
+  EXPECT_NEAR(jj.value("target_mm", 1e9), x0, 1e-9) << jj.dump();
+  st = wait_state("READY");
+  // Where X is (to the 6 decimals passed on the command line): the position stays as it is.
+  const std::string x1 = std::to_string(st["act_mm"][0].get<double>());
+  std::snprintf(want, sizeof want, "set-position: X at %.3f mm", std::stod(x1));
+  EXPECT_EQ(line(ctl({"set-position", "X", x1})), want);
+
+  // disable / enable, estop / reset: "<command>: state <STATE>" (and the cause when there is one).
+  EXPECT_EQ(line(ctl({"disable"})), "disable: state DISABLED");
+  const std::string en = line(ctl({"enable"}));
+  EXPECT_EQ(en.rfind("enable: state ", 0), 0u) << en;
+  ASSERT_EQ(wait_state("READY").value("state", ""), "READY");
+  const std::string es = line(ctl({"estop"}));
+  EXPECT_EQ(es.rfind("estop: state ESTOP", 0), 0u) << es;
+  const std::string rs = line(ctl({"reset"}));
+  EXPECT_EQ(rs.rfind("reset: state ", 0), 0u) << rs;
+  EXPECT_EQ(wait_state("READY").value("state", ""), "READY");
+  // status itself is printed whole, as before.
+  EXPECT_GT(lines_of(ctl({"status"}).out).size(), 10u);
+}
+
 TEST(ContourctlNoDaemon, ClearErrorWhenSocketMissing) {
   const fs::path dir = fs::temp_directory_path() / ("contourctl_nod_" + std::to_string(::getpid()));
   fs::create_directories(dir);
@@ -391,6 +524,10 @@ TEST(ContourctlNoDaemon, ClearErrorWhenSocketMissing) {
   EXPECT_EQ(q.rc, 3) << q.err;
   EXPECT_NE(q.err.find(stale), std::string::npos) << q.err;
   EXPECT_NE(q.err.find("refused"), std::string::npos) << q.err;
+  // --socket after the command is the same option (issue 17).
+  const Proc r = run_proc({kCtl, "run", kProgram, "--wait", "--socket", stale}, dir);
+  EXPECT_EQ(r.rc, 3) << r.err;
+  EXPECT_NE(r.err.find(stale), std::string::npos) << r.err;
   std::error_code ec;
   fs::remove_all(dir, ec);
 }

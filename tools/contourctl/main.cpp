@@ -119,6 +119,52 @@ void print(const json& j, bool as_json) {
   }
 }
 
+// The one-line answer of a command that changes the machine (issue 15): what was asked and
+// the state it left, from the daemon's reply (the reply itself is unchanged; --json prints it
+// whole). Empty when the reply lacks what the line needs: the caller then prints the reply.
+std::string confirmation(const std::string& cmd, const json& r) {
+  if (!r.is_object()) return {};
+  char b[160];
+  if (cmd == "jog" && r.contains("axis") && r.contains("target_mm")) {
+    std::snprintf(b, sizeof b, "jog: %s to %.3f mm", r["axis"].get<std::string>().c_str(),
+                  r["target_mm"].get<double>());
+    return b;
+  }
+  if (cmd == "set-position" && r.contains("axis") && r.contains("position_mm")) {
+    std::snprintf(b, sizeof b, "set-position: %s at %.3f mm",
+                  r["axis"].get<std::string>().c_str(), r["position_mm"].get<double>());
+    return b;
+  }
+  if (cmd == "override" && r.contains("feed_override_percent")) {
+    std::snprintf(b, sizeof b, "override: feed %g %%", r["feed_override_percent"].get<double>());
+    return b;
+  }
+  if (cmd == "force" && r.contains("enabled")) {
+    std::snprintf(b, sizeof b, "force: %s, reference %.1f N, %s",
+                  r["enabled"].get<bool>() ? "on" : "off", r.value("reference_n", 0.0),
+                  r.value("status", std::string("?")).c_str());
+    return b;
+  }
+  if (cmd == "shutdown" && r.value("shutting_down", false))
+    return "shutdown: contourd is stopping";
+  if (r.contains("state") && r["state"].is_string()) {
+    // hold, resume, stop, estop, reset, enable, disable: the status after the command.
+    std::string line = cmd + ": state " + r["state"].get<std::string>();
+    const std::string cause = r.value("cause", std::string("none"));
+    if (cause != "none") line += " (cause " + cause + ")";
+    return line;
+  }
+  return {};
+}
+
+void print_confirmation(const std::string& cmd, const json& r, bool as_json) {
+  const std::string line = as_json ? std::string() : confirmation(cmd, r);
+  if (line.empty())
+    print(r, as_json);
+  else
+    std::cout << line << '\n';
+}
+
 void print_run_summary(const json& r) {
   const bool done = r.value("completed", false);
   std::printf("run: job %llu %s (state %s) in %.3f s\n",
@@ -354,8 +400,14 @@ int main(int argc, char** argv) {
   app.footer(kFooter);
   std::string socket_path;
   bool as_json = false;
-  app.add_option("--socket", socket_path, "command socket (see below)");
-  app.add_flag("--json", as_json, "print JSON (one object per line) instead of text");
+  // Global options go before or after the subcommand (`contourctl --json status` ==
+  // `contourctl status --json`): an option a subcommand does not know falls through to the app.
+  // Subcommands inherit this setting when they are created, so it comes first.
+  app.fallthrough();
+  app.add_option("--socket", socket_path,
+                 "command socket (see below; before or after the command)");
+  app.add_flag("--json", as_json,
+               "print JSON (one object per line) instead of text (before or after the command)");
   app.require_subcommand(1);
   RunOptions ro;
   std::string program;
@@ -610,7 +662,12 @@ int main(int argc, char** argv) {
         std::cout << format_gains(g);
       return kExitOk;
     }
-    print(c.call(req), as_json);
+    const json r = c.call(req);
+    // `force status` is a query: printed whole, like status.
+    if (cmd == "status" || cmd == "load" || (cmd == "force" && force_args[0] == "status"))
+      print(r, as_json);
+    else
+      print_confirmation(cmd, r, as_json);
     return kExitOk;
   } catch (const Unreachable& e) {
     std::cerr << "contourctl: " << e.what() << '\n';
