@@ -287,12 +287,10 @@ void CommandServer::accept_clients() {
       lk.lock();
       full = clients_.size() >= opt_.max_clients;
     }
-    if (full) {
-      // Only clients polled at least once can give way; otherwise the connection waits in the
-      // listen backlog for the next round (never refused).
-      bool evictable = false;
-      for (const auto& [id, c] : clients_) evictable = evictable || !c.fresh;
-      if (!evictable) return;
+    if (full && !has_eviction_candidate()) {
+      // Nobody can give way in this round (see evict_longest_idle): the connection waits in the
+      // listen backlog for the next round, which follows at once (never refused).
+      return;
     }
     lk.unlock();
     const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
@@ -313,27 +311,46 @@ void CommandServer::accept_clients() {
     lk.lock();
     c.info.id = next_id_++;
     lk.unlock();
-    if (full) evict_longest_idle(c.info);
+    if (full && !evict_longest_idle(c.info)) {
+      // Only if the candidate vanished meanwhile (it cannot: this thread alone erases).
+      ::close(fd);
+      return;
+    }
     lk.lock();
     ++stats_.connections;
     clients_.emplace(c.info.id, std::move(c));
   }
 }
 
+// Called with mu_ held.
+bool CommandServer::has_eviction_candidate() const {
+  bool any_fresh = false;
+  for (const auto& [id, c] : clients_) any_fresh = any_fresh || c.fresh;
+  for (const auto& [id, c] : clients_) {
+    if (!c.fresh && !(any_fresh && (c.requested || !c.topics.empty()))) return true;
+  }
+  return false;
+}
+
 bool CommandServer::evict_longest_idle(const ClientInfo& for_whom) {
   std::unique_lock lk(mu_);
-  // Longest idle first: non-subscribers before subscribers, then the oldest last request.
+  // Silent clients (never a complete request) before those that made requests, non-subscribers
+  // before subscribers, then the oldest last request (connect time for silent ones). While
+  // clients accepted in this round are still unpolled (all silent so far), only a silent client
+  // gives way: a burst of connections must not sweep out the established clients in one round.
+  bool any_fresh = false;
+  for (const auto& [id, c] : clients_) any_fresh = any_fresh || c.fresh;
+  auto rank = [](const Client& c) { return (c.topics.empty() ? 0 : 2) + (c.requested ? 1 : 0); };
   auto victim = clients_.end();
   for (auto it = clients_.begin(); it != clients_.end(); ++it) {
     const Client& c = it->second;
-    if (c.fresh) continue;
+    if (c.fresh || (any_fresh && (c.requested || !c.topics.empty()))) continue;
     if (victim == clients_.end()) {
       victim = it;
       continue;
     }
     const Client& v = victim->second;
-    const bool c_sub = !c.topics.empty(), v_sub = !v.topics.empty();
-    if (c_sub != v_sub ? !c_sub : c.last_request < v.last_request) victim = it;
+    if (rank(c) != rank(v) ? rank(c) < rank(v) : c.last_request < v.last_request) victim = it;
   }
   if (victim == clients_.end()) return false;
   lk.unlock();
@@ -344,9 +361,14 @@ bool CommandServer::evict_longest_idle(const ClientInfo& for_whom) {
   ++stats_.evicted_idle;
   ++stats_.dropped_clients;
   notice(ServerNotice::Kind::kEvicted, v.info,
-         "socket: table full (" + std::to_string(opt_.max_clients) + " clients, socket.max_clients): evicted " +
-             describe(v.info) + ", idle " + seconds_text(seconds_between(v.last_request, Clock::now())) +
-             (v.topics.empty() ? std::string() : " (subscriber)") + ", to admit " + describe(for_whom));
+         "socket: table full (" + std::to_string(opt_.max_clients) +
+             " clients, socket.max_clients): evicted " + describe(v.info) + ", " +
+             (v.requested ? "idle " : "silent since connecting ") +
+             seconds_text(seconds_between(v.last_request, Clock::now())) + " ago" +
+             (v.in.empty() ? std::string()
+                           : " with " + std::to_string(v.in.size()) + " bytes of an unfinished line") +
+             (v.topics.empty() ? std::string() : " (subscriber)") + ", to admit " +
+             describe(for_whom));
   ::close(v.fd);
   clients_.erase(victim);
   return true;
@@ -439,6 +461,7 @@ bool CommandServer::process_input(Client& c) {
 void CommandServer::handle_line(Client& c, const std::string& line) {
   const Clock::time_point now = Clock::now();
   c.last_request = now;
+  c.requested = true;
   const double rate = opt_.max_requests_per_s;
   const double burst = std::max(1.0, rate);
   c.tokens = std::min(burst, c.tokens + rate * seconds_between(c.refill_at, now));

@@ -18,10 +18,13 @@
 // - idle: a client without a complete request for idle_timeout_s is dropped (a slow-loris writer
 //   sending a partial line byte by byte counts as idle). Subscribers (events/telemetry) are
 //   consumers and exempt while subscribed.
-// - full table: a new connection is never refused; the longest-idle client (last complete request,
-//   else connect time; non-subscribers first) is closed to make room, after its pending input has
-//   been served (a queued estop in it still runs). Clients accepted in the same poll round are not
-//   candidates (the rest waits in the listen backlog for one round).
+// - full table: a new connection is never refused; the longest-idle client is closed to make room,
+//   after its pending input has been served (a queued estop in it still runs). Order: clients that
+//   never sent a complete request (oldest connection first), then those that did (oldest last
+//   request first), subscribers last. Clients accepted in the same poll round are not candidates,
+//   and while there are such, only silent clients are (a burst of connections cannot sweep out the
+//   established clients in one round); otherwise the connection waits in the listen backlog for
+//   the next round, which follows at once.
 // - rate: more than max_requests_per_s requests (token bucket, 1 s burst) get the error reply
 //   "rate limited ..."; estop, hold and stop are never refused.
 // - buffered bytes: a client with more than max_buffered_bytes of replies/events unread is
@@ -127,6 +130,7 @@ class CommandServer {
     bool discarding = false;  // inside an oversize line
     bool eof = false;         // peer hung up: serve what is in `in`, then close
     bool fresh = true;        // accepted in this poll round (not yet polled: never evicted)
+    bool requested = false;   // has sent a complete request
     bool overflow = false;    // out > max_backlog_bytes: dropped at the end of the round
     std::vector<std::string> topics;
     Clock::time_point connected_at{};
@@ -139,6 +143,7 @@ class CommandServer {
   void accept_clients();
   void reap_hung_up_clients();
   bool evict_longest_idle(const ClientInfo& for_whom);
+  [[nodiscard]] bool has_eviction_candidate() const;
   void drop_idle_clients(Clock::time_point now);
   enum class ReadResult { kDrained, kMore, kClosed };  // EAGAIN / budget used / EOF or error
   ReadResult read_client(Client& c);    // appends up to kReadBudgetBytes to c.in

@@ -237,6 +237,16 @@ TEST(CommandServerLimits, SilentClientsGiveWayToANewConnection) {
   CommandServerOptions o;
   o.max_clients = 4;
   Rig rig(o);
+  // An established client (an HMI polling status) and a subscriber: the burst of silent
+  // connections below must not sweep them out, although their last request is older.
+  const int hmi = connect_to(rig.opt.path);
+  const int sub = connect_to(rig.opt.path);
+  ASSERT_GE(hmi, 0);
+  ASSERT_GE(sub, 0);
+  send_all(hmi, R"({"cmd":"echo","value":0})" "\n");
+  ASSERT_EQ(json::parse(read_line(hmi))["ok"], true);
+  send_all(sub, R"({"cmd":"sub"})" "\n");
+  ASSERT_EQ(json::parse(read_line(sub))["ok"], true);
   std::vector<int> silent;
   for (int i = 0; i < 12; ++i) {
     silent.push_back(connect_to(rig.opt.path));
@@ -252,8 +262,12 @@ TEST(CommandServerLimits, SilentClientsGiveWayToANewConnection) {
   EXPECT_EQ(r["result"]["done"], "estop");
   const auto st = rig.server->stats();
   EXPECT_LE(st.clients, 4u);
-  EXPECT_GE(st.evicted_idle, 9u);  // 13 connections through a table of 4
+  EXPECT_GE(st.evicted_idle, 11u);  // 15 connections through a table of 4
   EXPECT_EQ(st.dropped_clients, st.evicted_idle);
+  send_all(hmi, R"({"cmd":"echo","value":5})" "\n");
+  EXPECT_EQ(json::parse(read_line(hmi))["result"]["value"], 5) << "established client evicted";
+  rig.server->publish("events", {{"event", "still"}});
+  EXPECT_EQ(json::parse(read_line(sub))["event"], "still") << "subscriber evicted";
   // Each eviction is a notice naming the client that gave way and the one admitted.
   bool named = false;
   for (const auto& n : rig.notices_copy()) {
@@ -263,13 +277,14 @@ TEST(CommandServerLimits, SilentClientsGiveWayToANewConnection) {
                           std::to_string(::getpid())),
               std::string::npos)
         << n.text;
+    EXPECT_NE(n.text.find("silent since connecting"), std::string::npos) << n.text;
     named = named || n.text.find("to admit client") != std::string::npos;
   }
   EXPECT_TRUE(named);
   // The first silent clients (the longest idle) were the ones closed.
   EXPECT_TRUE(closed_by_peer(silent.front(), 2000));
   for (int s : silent) ::close(s);
-  ::close(fd);
+  for (int x : {fd, hmi, sub}) ::close(x);
 }
 
 TEST(CommandServerLimits, IdleAndSlowLorisClientsAreDroppedActiveAndSubscribersStay) {
