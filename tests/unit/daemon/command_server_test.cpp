@@ -138,7 +138,7 @@ TEST_F(CommandServerTest, RandomBytesAndRapidConnectsLeaveItServing) {
   EXPECT_EQ(r["result"]["value"], "ok");
   ::close(fd);
   const auto st = server_->stats();
-  EXPECT_GT(st.connections + st.errors, 200u);  // refused ones (too many clients) count as errors
+  EXPECT_GT(st.connections, 200u);  // none refused: a full table evicts (issue 17)
 }
 
 TEST_F(CommandServerTest, SeveralClientsAndSubscriptions) {
