@@ -266,8 +266,9 @@ void CommandServer::drop_idle_clients(Clock::time_point now) {
       notice(ServerNotice::Kind::kDroppedIdle, c.info,
              "socket: dropped " + describe(c.info) + ": no complete request for " +
                  seconds_text(seconds_between(c.last_request, Clock::now())) +
-                 (c.in.empty() ? std::string()
-                               : " (" + std::to_string(c.in.size()) + " bytes of an unfinished line)") +
+                 (c.in.empty()
+                      ? std::string()
+                      : " (" + std::to_string(c.in.size()) + " bytes of an unfinished line)") +
                  " (socket.idle_timeout_s " + seconds_text(opt_.idle_timeout_s) + ")");
     }
     ::close(c.fd);
@@ -360,13 +361,14 @@ bool CommandServer::evict_longest_idle(const ClientInfo& for_whom) {
   if (v.overflow) return true;  // the sweep closes and counts it
   ++stats_.evicted_idle;
   ++stats_.dropped_clients;
+  const std::string unfinished =
+      v.in.empty() ? std::string()
+                   : " with " + std::to_string(v.in.size()) + " bytes of an unfinished line";
   notice(ServerNotice::Kind::kEvicted, v.info,
          "socket: table full (" + std::to_string(opt_.max_clients) +
              " clients, socket.max_clients): evicted " + describe(v.info) + ", " +
              (v.requested ? "idle " : "silent since connecting ") +
-             seconds_text(seconds_between(v.last_request, Clock::now())) + " ago" +
-             (v.in.empty() ? std::string()
-                           : " with " + std::to_string(v.in.size()) + " bytes of an unfinished line") +
+             seconds_text(seconds_between(v.last_request, Clock::now())) + " ago" + unfinished +
              (v.topics.empty() ? std::string() : " (subscriber)") + ", to admit " +
              describe(for_whom));
   ::close(v.fd);

@@ -202,7 +202,8 @@ TEST(SocketLockout, SilentClientsAndASlowLorisCannotKeepEstopOut) {
     const std::string l = read_line(ev, 50);
     if (l.find("<timeout>") != std::string::npos) continue;
     const json e = json::parse(l, nullptr, false);
-    if (e.is_object() && e.value("event", "") == "socket" && e.value("action", "") == "evicted_idle") {
+    if (e.is_object() && e.value("event", "") == "socket" &&
+        e.value("action", "") == "evicted_idle") {
       EXPECT_EQ(e["client"]["pid"], ::getpid()) << l;
       EXPECT_NE(e["text"].get<std::string>().find("table full"), std::string::npos) << l;
       seen = true;
@@ -274,7 +275,9 @@ TEST(SocketLockout, IdleAndSlowLorisClientsAreDroppedAndARequestBurstIsRateLimit
   const int fd = contour::test::connect_unix(d.sock());
   ASSERT_GE(fd, 0);
   std::string burst;
-  for (int i = 0; i < 60; ++i) burst += R"({"id":)" + std::to_string(i) + R"(,"cmd":"status"})" "\n";
+  for (int i = 0; i < 60; ++i) {
+    burst += R"({"id":)" + std::to_string(i) + R"(,"cmd":"status"})" "\n";
+  }
   burst += R"({"id":"e","cmd":"estop"})" "\n";
   send_all(fd, burst);
   int limited = 0;

@@ -346,7 +346,9 @@ TEST(CommandServerLimits, RateLimitRefusesAllButSafetyCommands) {
   const int fd = connect_to(rig.opt.path);
   ASSERT_GE(fd, 0);
   std::string burst;
-  for (int i = 0; i < 30; ++i) burst += R"({"id":)" + std::to_string(i) + R"(,"cmd":"echo","value":1})" "\n";
+  for (int i = 0; i < 30; ++i) {
+    burst += R"({"id":)" + std::to_string(i) + R"(,"cmd":"echo","value":1})" "\n";
+  }
   burst += R"({"id":"e","cmd":"estop"})" "\n" R"({"id":"h","cmd":"hold"})" "\n"
            R"({"id":"s","cmd":"stop"})" "\n";
   send_all(fd, burst);
