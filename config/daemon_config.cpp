@@ -64,6 +64,10 @@ SocketConfig parse_socket(Section& s) {
   c.group = s.string("group", "");
   c.max_clients = static_cast<int>(s.integer("max_clients", 16, 1, 1024));
   c.max_line_bytes = static_cast<int>(s.integer("max_line_bytes", 65536, 256, 16 << 20));
+  c.idle_timeout_s = s.number("idle_timeout_s", 60.0, 0.1, 86400.0);
+  c.max_requests_per_s = static_cast<int>(s.integer("max_requests_per_s", 500, 1, 100000));
+  c.max_buffered_bytes =
+      static_cast<int>(s.integer("max_buffered_bytes", 4 << 20, 64 << 10, 1 << 30));
   return c;
 }
 

@@ -36,8 +36,11 @@ struct SocketConfig {
   std::string path = "/run/contourd/contourd.sock";
   int mode = 0660;                 // octal in YAML as a string "0660" or number 432
   std::string group;
-  int max_clients = 16;
+  int max_clients = 16;            // a full table never refuses: the longest-idle client gives way
   int max_line_bytes = 65536;
+  double idle_timeout_s = 60.0;    // no complete request this long: dropped (subscribers exempt)
+  int max_requests_per_s = 500;    // per client (1 s burst); estop/hold/stop are never refused
+  int max_buffered_bytes = 4 << 20;  // per client: replies/events unread beyond this: dropped
 };
 
 struct LogConfig {

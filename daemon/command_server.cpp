@@ -8,7 +8,9 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <stdexcept>
 
@@ -23,8 +25,10 @@ void set_nonblocking(int fd) {
 }
 }  // namespace
 
-CommandServer::CommandServer(CommandServerOptions opt, Handler handler)
-    : opt_(std::move(opt)), handler_(std::move(handler)) {}
+CommandServer::CommandServer(CommandServerOptions opt, Handler handler, NoticeHandler on_notice)
+    : opt_(std::move(opt)), handler_(std::move(handler)), on_notice_(std::move(on_notice)) {
+  notice_tokens_ = std::max(1.0, opt_.max_notices_per_s);
+}
 
 CommandServer::~CommandServer() { stop(); }
 
@@ -72,7 +76,7 @@ void CommandServer::start() {
       throw std::runtime_error(opt_.path + ": cannot give the socket to group '" + opt_.group + "'");
     }
   }
-  if (::chmod(opt_.path.c_str(), opt_.mode) != 0 || ::listen(listen_fd_, 16) != 0) {
+  if (::chmod(opt_.path.c_str(), opt_.mode) != 0 || ::listen(listen_fd_, 64) != 0) {
     const std::string msg = errno_text(opt_.path + ": chmod/listen");
     ::close(listen_fd_);
     ::unlink(opt_.path.c_str());
@@ -101,83 +105,275 @@ void CommandServer::stop() {
   ::unlink(opt_.path.c_str());
 }
 
+const char* to_string(ServerNotice::Kind k) noexcept {
+  switch (k) {
+    case ServerNotice::Kind::kDroppedIdle: return "dropped_idle";
+    case ServerNotice::Kind::kEvicted: return "evicted_idle";
+    case ServerNotice::Kind::kRateLimited: return "rate_limited";
+    case ServerNotice::Kind::kDroppedBuffer: return "oversize_buffer";
+  }
+  return "?";
+}
+
+std::string CommandServer::describe(const ClientInfo& c) {
+  return "client " + std::to_string(c.id) + " (pid " + std::to_string(c.pid) + ", uid " +
+         std::to_string(c.uid) + ", fd " + std::to_string(c.fd) + ")";
+}
+
+namespace {
+std::string seconds_text(double s) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.1f s", s);
+  return b;
+}
+double seconds_between(std::chrono::steady_clock::time_point a,
+                       std::chrono::steady_clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
+bool is_safety_command(const std::string& cmd) {
+  return cmd == "estop" || cmd == "hold" || cmd == "stop";
+}
+}  // namespace
+
 void CommandServer::run() {
   std::vector<pollfd> fds;
   std::vector<std::uint64_t> ids;
+  std::vector<char> backlogged;  // client had unprocessed complete lines: served without POLLIN
+  const auto idle = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(opt_.idle_timeout_s));
   while (running_) {
     fds.clear();
     ids.clear();
+    backlogged.clear();
     fds.push_back({listen_fd_, POLLIN, 0});
     fds.push_back({wake_pipe_[0], POLLIN, 0});
+    const Clock::time_point round_start = Clock::now();
+    Clock::time_point next_deadline = round_start + std::chrono::milliseconds(500);
+    bool any_backlogged = false;
     {
       std::lock_guard lk(mu_);
       for (auto& [id, c] : clients_) {
-        short ev = POLLIN;
+        // Stop reading a client while it has complete lines waiting (kernel backpressure keeps
+        // its input bounded); those lines are served below without waiting for poll.
+        const bool waiting = c.eof || has_complete_line(c);
+        short ev = waiting ? 0 : POLLIN;
         if (!c.out.empty()) ev = static_cast<short>(ev | POLLOUT);
         fds.push_back({c.fd, ev, 0});
         ids.push_back(id);
+        backlogged.push_back(waiting ? 1 : 0);
+        any_backlogged = any_backlogged || waiting;
+        c.fresh = false;
+        if (c.topics.empty()) next_deadline = std::min(next_deadline, c.last_request + idle);
       }
     }
-    const int n = ::poll(fds.data(), fds.size(), 500);
+    int timeout_ms = 0;
+    if (!any_backlogged) {
+      const auto wait = std::chrono::ceil<std::chrono::milliseconds>(next_deadline - round_start);
+      timeout_ms = static_cast<int>(std::clamp<std::int64_t>(wait.count(), 0, 500));
+    }
+    const int n = ::poll(fds.data(), fds.size(), timeout_ms);
     if (n < 0 && errno != EINTR) break;
     if (fds[1].revents & POLLIN) {
       char buf[64];
       while (::read(wake_pipe_[0], buf, sizeof(buf)) > 0) {
       }
     }
-    if (fds[0].revents & POLLIN) accept_clients();
     for (std::size_t i = 0; i < ids.size(); ++i) {
-      const short re = fds[i + 2].revents;
-      if (re == 0) continue;
+      const pollfd& p = fds[i + 2];
+      if (p.revents == 0 && backlogged[i] == 0) continue;
       std::unique_lock lk(mu_);
       auto it = clients_.find(ids[i]);
       if (it == clients_.end()) continue;
+      Client& c = it->second;
       bool keep = true;
-      if (re & (POLLIN | POLLHUP | POLLERR)) {
-        lk.unlock();
-        keep = read_client(it->second);  // handler runs without the lock held
-        lk.lock();
+      lk.unlock();  // the handler runs without the lock held (it may subscribe()/publish())
+      if ((p.events & POLLIN) && (p.revents & (POLLIN | POLLHUP | POLLERR))) {
+        if (read_client(c) == ReadResult::kClosed) c.eof = true;
       }
-      if (keep && (re & POLLOUT)) keep = flush_client(it->second);
-      if (!keep) {
-        ::close(it->second.fd);
+      keep = process_input(c);
+      lk.lock();
+      if (keep && (p.revents & POLLOUT)) keep = flush_client(c);
+      if (!keep && !c.overflow) {
+        ::close(c.fd);
         clients_.erase(it);
       }
     }
+    drop_idle_clients(Clock::now());
+    if (fds[0].revents & POLLIN) accept_clients();
+    {
+      // Clients over the output limit (from a reply above or from publish() on another thread).
+      std::lock_guard lk(mu_);
+      for (auto it = clients_.begin(); it != clients_.end();) {
+        if (!it->second.overflow) {
+          ++it;
+          continue;
+        }
+        ++stats_.oversize_buffer;
+        ++stats_.dropped_clients;
+        notice(ServerNotice::Kind::kDroppedBuffer, it->second.info,
+               "socket: dropped " + describe(it->second.info) + ": more than " +
+                   std::to_string(opt_.max_backlog_bytes) +
+                   " bytes of replies/events unread (socket.max_buffered_bytes)");
+        ::close(it->second.fd);
+        it = clients_.erase(it);
+      }
+    }
+    emit_notices();
+  }
+}
+
+bool CommandServer::has_complete_line(const Client& c) const {
+  return c.in.find('\n') != std::string::npos;
+}
+
+// Serves what a client has already sent (several rounds' worth, bounded) before it is closed by
+// the server: a queued estop in an evicted or idle-dropped client still runs.
+bool CommandServer::serve_pending(Client& c) {
+  for (int round = 0; round < 64; ++round) {
+    ReadResult r = ReadResult::kDrained;
+    if (!c.eof && !has_complete_line(c)) {
+      r = read_client(c);
+      if (r == ReadResult::kClosed) c.eof = true;
+    }
+    if (!process_input(c)) return false;
+    if (r == ReadResult::kDrained && !has_complete_line(c)) return true;
+  }
+  return true;
+}
+
+void CommandServer::drop_idle_clients(Clock::time_point now) {
+  const auto idle = std::chrono::duration<double>(opt_.idle_timeout_s);
+  std::vector<std::uint64_t> ids;
+  {
+    std::lock_guard lk(mu_);
+    for (const auto& [id, c] : clients_) {
+      if (c.topics.empty() && !c.fresh && now - c.last_request > idle) ids.push_back(id);
+    }
+  }
+  for (const std::uint64_t id : ids) {
+    std::unique_lock lk(mu_);
+    auto it = clients_.find(id);
+    if (it == clients_.end()) continue;
+    lk.unlock();
+    const bool alive = serve_pending(it->second);
+    lk.lock();
+    Client& c = it->second;
+    if (alive && !c.overflow && now - c.last_request <= idle) continue;  // it just sent one
+    if (c.overflow) continue;  // counted as oversize_buffer by the sweep
+    if (alive) {
+      ++stats_.dropped_idle;
+      ++stats_.dropped_clients;
+      notice(ServerNotice::Kind::kDroppedIdle, c.info,
+             "socket: dropped " + describe(c.info) + ": no complete request for " +
+                 seconds_text(seconds_between(c.last_request, Clock::now())) +
+                 (c.in.empty()
+                      ? std::string()
+                      : " (" + std::to_string(c.in.size()) + " bytes of an unfinished line)") +
+                 " (socket.idle_timeout_s " + seconds_text(opt_.idle_timeout_s) + ")");
+    }
+    ::close(c.fd);
+    clients_.erase(it);
   }
 }
 
 void CommandServer::accept_clients() {
   for (;;) {
-    const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-    if (fd < 0) return;
     std::unique_lock lk(mu_);
-    if (clients_.size() >= opt_.max_clients) {
+    bool full = clients_.size() >= opt_.max_clients;
+    if (full) {
       // A burst of short-lived clients can fill the table with peers that have already hung up
-      // but whose hang-up this thread has not polled yet; reap those before refusing anyone.
+      // but whose hang-up this thread has not polled yet; reap those before evicting anyone.
       lk.unlock();
       reap_hung_up_clients();
       lk.lock();
+      full = clients_.size() >= opt_.max_clients;
     }
-    if (clients_.size() >= opt_.max_clients) {
-      const char* msg = "{\"ok\":false,\"error\":\"too many clients\"}\n";
-      [[maybe_unused]] auto n = ::send(fd, msg, std::strlen(msg), MSG_NOSIGNAL | MSG_DONTWAIT);
-      ::close(fd);
-      ++stats_.errors;
-      continue;
+    if (full && !has_eviction_candidate()) {
+      // Nobody can give way in this round (see evict_longest_idle): the connection waits in the
+      // listen backlog for the next round, which follows at once (never refused).
+      return;
     }
+    lk.unlock();
+    const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+    if (fd < 0) return;
     Client c;
     c.fd = fd;
-    c.info.id = next_id_++;
+    c.info.fd = fd;
     ucred cred{};
     socklen_t len = sizeof(cred);
     if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) == 0) {
       c.info.uid = cred.uid;
       c.info.pid = cred.pid;
     }
+    c.connected_at = Clock::now();
+    c.last_request = c.connected_at;
+    c.tokens = std::max(1.0, opt_.max_requests_per_s);
+    c.refill_at = c.connected_at;
+    lk.lock();
+    c.info.id = next_id_++;
+    lk.unlock();
+    if (full && !evict_longest_idle(c.info)) {
+      // Only if the candidate vanished meanwhile (it cannot: this thread alone erases).
+      ::close(fd);
+      return;
+    }
+    lk.lock();
     ++stats_.connections;
     clients_.emplace(c.info.id, std::move(c));
   }
+}
+
+// Called with mu_ held.
+bool CommandServer::has_eviction_candidate() const {
+  bool any_fresh = false;
+  for (const auto& [id, c] : clients_) any_fresh = any_fresh || c.fresh;
+  for (const auto& [id, c] : clients_) {
+    if (!c.fresh && !(any_fresh && (c.requested || !c.topics.empty()))) return true;
+  }
+  return false;
+}
+
+bool CommandServer::evict_longest_idle(const ClientInfo& for_whom) {
+  std::unique_lock lk(mu_);
+  // Silent clients (never a complete request) before those that made requests, non-subscribers
+  // before subscribers, then the oldest last request (connect time for silent ones). While
+  // clients accepted in this round are still unpolled (all silent so far), only a silent client
+  // gives way: a burst of connections must not sweep out the established clients in one round.
+  bool any_fresh = false;
+  for (const auto& [id, c] : clients_) any_fresh = any_fresh || c.fresh;
+  auto rank = [](const Client& c) { return (c.topics.empty() ? 0 : 2) + (c.requested ? 1 : 0); };
+  auto victim = clients_.end();
+  for (auto it = clients_.begin(); it != clients_.end(); ++it) {
+    const Client& c = it->second;
+    if (c.fresh || (any_fresh && (c.requested || !c.topics.empty()))) continue;
+    if (victim == clients_.end()) {
+      victim = it;
+      continue;
+    }
+    const Client& v = victim->second;
+    if (rank(c) != rank(v) ? rank(c) < rank(v) : c.last_request < v.last_request) victim = it;
+  }
+  if (victim == clients_.end()) return false;
+  lk.unlock();
+  serve_pending(victim->second);
+  lk.lock();
+  Client& v = victim->second;
+  if (v.overflow) return true;  // the sweep closes and counts it
+  ++stats_.evicted_idle;
+  ++stats_.dropped_clients;
+  const std::string unfinished =
+      v.in.empty() ? std::string()
+                   : " with " + std::to_string(v.in.size()) + " bytes of an unfinished line";
+  notice(ServerNotice::Kind::kEvicted, v.info,
+         "socket: table full (" + std::to_string(opt_.max_clients) +
+             " clients, socket.max_clients): evicted " + describe(v.info) + ", " +
+             (v.requested ? "idle " : "silent since connecting ") +
+             seconds_text(seconds_between(v.last_request, Clock::now())) + " ago" + unfinished +
+             (v.topics.empty() ? std::string() : " (subscriber)") + ", to admit " +
+             describe(for_whom));
+  ::close(v.fd);
+  clients_.erase(victim);
+  return true;
 }
 
 void CommandServer::reap_hung_up_clients() {
@@ -193,61 +389,117 @@ void CommandServer::reap_hung_up_clients() {
     pollfd p{it->second.fd, static_cast<short>(POLLIN | POLLRDHUP), 0};
     if (::poll(&p, 1, 0) != 1 || (p.revents & (POLLHUP | POLLERR | POLLRDHUP)) == 0) continue;
     lk.unlock();
-    const bool keep = read_client(it->second);  // answers what it sent, then sees the EOF
+    const bool keep = serve_pending(it->second);  // answers what it sent, then sees the EOF
     lk.lock();
-    if (!keep) {
+    if (!keep && !it->second.overflow) {
       ::close(it->second.fd);
       clients_.erase(it);
     }
   }
 }
 
-bool CommandServer::read_client(Client& c) {
+CommandServer::ReadResult CommandServer::read_client(Client& c) {
   char buf[4096];
-  for (;;) {
+  std::size_t got = 0;
+  while (got < kReadBudgetBytes) {
     const ssize_t n = ::read(c.fd, buf, sizeof(buf));
-    if (n == 0) return false;
-    if (n < 0) return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR;
-    for (ssize_t i = 0; i < n; ++i) {
-      const char ch = buf[i];
-      if (ch == '\n') {
-        if (c.discarding) {
-          c.discarding = false;
-        } else {
-          std::string line;
-          line.swap(c.in);
-          if (!line.empty() && line.back() == '\r') line.pop_back();
-          if (!line.empty()) handle_line(c, line);
-        }
-        continue;
-      }
-      if (c.discarding) continue;
-      c.in.push_back(ch);
-      if (c.in.size() > opt_.max_line_bytes) {
-        c.in.clear();
-        c.discarding = true;
-        {
-          std::lock_guard lk(mu_);
-          ++stats_.errors;
-        }
-        queue(c, error_reply("request line longer than " + std::to_string(opt_.max_line_bytes) +
-                             " bytes; discarded"));
-      }
+    if (n == 0) return ReadResult::kClosed;
+    if (n < 0) {
+      if (errno == EAGAIN || errno == EWOULDBLOCK) return ReadResult::kDrained;
+      if (errno == EINTR) continue;
+      return ReadResult::kClosed;
     }
+    c.in.append(buf, static_cast<std::size_t>(n));
+    got += static_cast<std::size_t>(n);
   }
+  return ReadResult::kMore;
+}
+
+bool CommandServer::process_input(Client& c) {
+  int handled = 0;
+  std::size_t pos = 0;  // consumed prefix of c.in
+  while (handled < kLinesPerRound && !c.overflow) {
+    const std::size_t nl = c.in.find('\n', pos);
+    if (c.discarding) {
+      if (nl == std::string::npos) {
+        pos = c.in.size();
+        break;
+      }
+      c.discarding = false;
+      pos = nl + 1;
+      continue;
+    }
+    const std::size_t len = (nl == std::string::npos ? c.in.size() : nl) - pos;
+    if (len > opt_.max_line_bytes) {
+      {
+        std::lock_guard lk(mu_);
+        ++stats_.errors;
+      }
+      queue(c, error_reply("request line longer than " + std::to_string(opt_.max_line_bytes) +
+                           " bytes; discarded"));
+      ++handled;
+      if (nl == std::string::npos) {
+        c.discarding = true;
+        pos = c.in.size();
+        break;
+      }
+      pos = nl + 1;
+      continue;
+    }
+    if (nl == std::string::npos) break;
+    std::string line = c.in.substr(pos, len);
+    pos = nl + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) continue;
+    handle_line(c, line);
+    ++handled;
+  }
+  c.in.erase(0, pos);
+  if (c.overflow) return false;
+  // After EOF: the complete lines it sent are served (over several rounds), a partial one is not.
+  return !(c.eof && !has_complete_line(c));
 }
 
 void CommandServer::handle_line(Client& c, const std::string& line) {
+  const Clock::time_point now = Clock::now();
+  c.last_request = now;
+  c.requested = true;
+  const double rate = opt_.max_requests_per_s;
+  const double burst = std::max(1.0, rate);
+  c.tokens = std::min(burst, c.tokens + rate * seconds_between(c.refill_at, now));
+  c.refill_at = now;
+  const bool limited = c.tokens < 1.0;
+  if (!limited) {
+    c.tokens -= 1.0;
+    c.rate_noticed = false;
+  }
   {
     std::lock_guard lk(mu_);
     ++stats_.requests;
   }
+  bool refused = false;
   // The handler runs without mu_ held (it may call subscribe()/publish(), which take it).
-  RequestOutcome r = handle_request_line(
-      line, [&](const nlohmann::json& req) { return handler_(req, c.info); });
-  if (r.error) {
+  RequestOutcome r = handle_request_line(line, [&](const nlohmann::json& req) {
+    if (limited && !is_safety_command(req.at("cmd").get<std::string>())) {
+      refused = true;
+      throw CommandError("rate limited: more than " + std::to_string(static_cast<long>(rate)) +
+                         " requests/s from this client (socket.max_requests_per_s); request "
+                         "refused (estop, hold and stop are never refused)");
+    }
+    return handler_(req, c.info);
+  });
+  {
     std::lock_guard lk(mu_);
-    ++stats_.errors;
+    if (r.error) ++stats_.errors;
+    if (refused) ++stats_.rate_limited;
+  }
+  if (refused && !c.rate_noticed) {
+    c.rate_noticed = true;  // one notice per burst over the rate
+    notice(ServerNotice::Kind::kRateLimited, c.info,
+           "socket: rate limited " + describe(c.info) + ": more than " +
+               std::to_string(static_cast<long>(rate)) +
+               " requests/s (socket.max_requests_per_s); refusing its requests except estop, hold "
+               "and stop");
   }
   queue(c, r.reply);
 }
@@ -259,20 +511,49 @@ void CommandServer::queue(Client& c, const nlohmann::json& j) {
   flush_client(c);
 }
 
+// Called with mu_ held. False only when the peer is gone; a backlog over the limit sets
+// `overflow` (the run loop's sweep closes and counts the client).
 bool CommandServer::flush_client(Client& c) {
   while (!c.out.empty()) {
     const ssize_t n = ::send(c.fd, c.out.data(), c.out.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
     if (n < 0) {
       if (errno == EAGAIN || errno == EWOULDBLOCK) break;
+      if (errno == EINTR) continue;
       return false;
     }
     c.out.erase(0, static_cast<std::size_t>(n));
   }
-  if (c.out.size() > opt_.max_backlog_bytes) {
-    ++stats_.dropped_clients;
-    return false;
-  }
+  if (c.out.size() > opt_.max_backlog_bytes) c.overflow = true;
   return true;
+}
+
+// Server thread only (pending_notices_ and the notice bucket are not shared).
+void CommandServer::notice(ServerNotice::Kind k, const ClientInfo& who, std::string text) {
+  const Clock::time_point now = Clock::now();
+  const double rate = opt_.max_notices_per_s;
+  notice_tokens_ = std::min(std::max(1.0, rate),
+                            notice_tokens_ + rate * seconds_between(notice_refill_at_, now));
+  notice_refill_at_ = now;
+  if (notice_tokens_ < 1.0) {
+    ++notices_suppressed_since_;
+    notices_suppressed_.fetch_add(1, std::memory_order_relaxed);  // callers may hold mu_
+    return;
+  }
+  notice_tokens_ -= 1.0;
+  if (notices_suppressed_since_ > 0) {
+    text += " (" + std::to_string(notices_suppressed_since_) +
+            " earlier notices suppressed; see status.counters.socket)";
+    notices_suppressed_since_ = 0;
+  }
+  pending_notices_.push_back({k, who, std::move(text)});
+}
+
+void CommandServer::emit_notices() {
+  if (pending_notices_.empty()) return;
+  std::vector<ServerNotice> v;
+  v.swap(pending_notices_);
+  if (!on_notice_) return;
+  for (const auto& n : v) on_notice_(n);
 }
 
 void CommandServer::subscribe(std::uint64_t client, const std::string& topic) {
@@ -298,9 +579,13 @@ void CommandServer::publish(const std::string& topic, const nlohmann::json& even
   {
     std::lock_guard lk(mu_);
     for (auto& [id, c] : clients_) {
+      if (c.overflow) continue;
       for (const auto& t : c.topics) {
         if (t == topic) {
           c.out += s;
+          // A subscriber that does not read is dropped by the server thread's sweep (POLLOUT
+          // never fires for it, so the check cannot wait for a flush).
+          if (c.out.size() > opt_.max_backlog_bytes) c.overflow = true;
           any = true;
           break;
         }
@@ -317,6 +602,7 @@ CommandServerStats CommandServer::stats() const {
   std::lock_guard lk(mu_);
   CommandServerStats s = stats_;
   s.clients = clients_.size();
+  s.notices_suppressed = notices_suppressed_.load(std::memory_order_relaxed);
   return s;
 }
 

@@ -8,14 +8,34 @@
 //
 // One server thread (poll(2)) serves several clients at once. Malformed JSON, non-object requests,
 // missing/non-string "cmd" and lines longer than max_line_bytes get an error reply; an oversize
-// line is discarded up to its newline. A slow client whose output backlog exceeds
-// max_backlog_bytes is disconnected rather than allowed to grow memory. The handler runs on the
-// server thread (never on the RT thread) and must not block for long.
+// line is discarded up to its newline. The handler runs on the server thread (never on the RT
+// thread) and must not block for long.
 // The socket file is created with `mode` (default 0660: group-writable, not world-writable) and,
 // when `group` is set, chowned to that group.
+//
+// The operator can always get through (issue 17); the limits, each counted in CommandServerStats
+// and reported through `on_notice` (naming the client: id, pid, uid, fd):
+// - idle: a client without a complete request for idle_timeout_s is dropped (a slow-loris writer
+//   sending a partial line byte by byte counts as idle). Subscribers (events/telemetry) are
+//   consumers and exempt while subscribed.
+// - full table: a new connection is never refused; the longest-idle client is closed to make room,
+//   after its pending input has been served (a queued estop in it still runs). Order: clients that
+//   never sent a complete request (oldest connection first), then those that did (oldest last
+//   request first), subscribers last. Clients accepted in the same poll round are not candidates,
+//   and while there are such, only silent clients are (a burst of connections cannot sweep out the
+//   established clients in one round); otherwise the connection waits in the listen backlog for
+//   the next round, which follows at once.
+// - rate: more than max_requests_per_s requests (token bucket, 1 s burst) get the error reply
+//   "rate limited ..."; estop, hold and stop are never refused.
+// - buffered bytes: a client with more than max_buffered_bytes of replies/events unread is
+//   dropped; its input is bounded by max_line_bytes plus one read (the server stops reading a
+//   client while it has unprocessed complete lines).
+// - fairness: per poll round each client gets at most kReadBudgetBytes read and kLinesPerRound
+//   requests handled, so no client can keep the thread busy while others wait.
 #include <sys/types.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -36,20 +56,39 @@ struct CommandServerOptions {
   std::string group;                     // empty: keep the process group
   std::size_t max_line_bytes = 64 * 1024;
   std::size_t max_clients = 16;
-  std::size_t max_backlog_bytes = 4 * 1024 * 1024;
+  std::size_t max_backlog_bytes = 4 * 1024 * 1024;  // socket.max_buffered_bytes (output)
+  double idle_timeout_s = 60.0;           // socket.idle_timeout_s
+  double max_requests_per_s = 500.0;      // socket.max_requests_per_s (estop/hold/stop exempt)
+  double max_notices_per_s = 20.0;        // on_notice calls; the rest are counted and summarised
 };
 
 struct ClientInfo {
   std::uint64_t id = 0;   // unique per connection
   uid_t uid = 0;          // peer credentials (SO_PEERCRED)
   pid_t pid = 0;
+  int fd = -1;            // server-side descriptor (for log lines; reused after close)
 };
+
+// What the server did to whom (dropped, evicted, rate-limited), for the daemon's log and the
+// `events` subscription. Emitted on the server thread with no lock held.
+struct ServerNotice {
+  enum class Kind { kDroppedIdle, kEvicted, kRateLimited, kDroppedBuffer };
+  Kind kind = Kind::kDroppedIdle;
+  ClientInfo client;
+  std::string text;  // one line naming the rule, the client (id, pid, uid, fd) and the figures
+};
+[[nodiscard]] const char* to_string(ServerNotice::Kind k) noexcept;
 
 struct CommandServerStats {
   std::uint64_t connections = 0;
   std::uint64_t requests = 0;
-  std::uint64_t errors = 0;        // malformed / oversize / rejected requests
-  std::uint64_t dropped_clients = 0;
+  std::uint64_t errors = 0;          // malformed / oversize / rejected / rate-limited requests
+  std::uint64_t dropped_clients = 0; // closed by the server: idle + evicted + oversize_buffer
+  std::uint64_t dropped_idle = 0;    // no complete request within idle_timeout_s
+  std::uint64_t evicted_idle = 0;    // longest-idle client closed to make room for a new one
+  std::uint64_t rate_limited = 0;    // requests refused by the per-client rate limit
+  std::uint64_t oversize_buffer = 0; // clients dropped for > max_backlog_bytes unread output
+  std::uint64_t notices_suppressed = 0;  // notices over max_notices_per_s (counted, not emitted)
   std::size_t clients = 0;
 };
 
@@ -57,8 +96,13 @@ class CommandServer {
  public:
   // Returns the reply's "result" object, or throws CommandError for an error reply.
   using Handler = std::function<nlohmann::json(const nlohmann::json& request, const ClientInfo&)>;
+  using NoticeHandler = std::function<void(const ServerNotice&)>;
 
-  CommandServer(CommandServerOptions opt, Handler handler);
+  // Per poll round and client: bytes read and requests handled (fairness between clients).
+  static constexpr std::size_t kReadBudgetBytes = 16 * 1024;
+  static constexpr int kLinesPerRound = 8;
+
+  CommandServer(CommandServerOptions opt, Handler handler, NoticeHandler on_notice = {});
   ~CommandServer();
   CommandServer(const CommandServer&) = delete;
   CommandServer& operator=(const CommandServer&) = delete;
@@ -77,25 +121,45 @@ class CommandServer {
   [[nodiscard]] const std::string& path() const { return opt_.path; }
 
  private:
+  using Clock = std::chrono::steady_clock;
   struct Client {
     int fd = -1;
     ClientInfo info;
-    std::string in;
+    std::string in;           // received, not yet processed (complete lines + one partial line)
     std::string out;
     bool discarding = false;  // inside an oversize line
+    bool eof = false;         // peer hung up: serve what is in `in`, then close
+    bool fresh = true;        // accepted in this poll round (not yet polled: never evicted)
+    bool requested = false;   // has sent a complete request
+    bool overflow = false;    // out > max_backlog_bytes: dropped at the end of the round
     std::vector<std::string> topics;
+    Clock::time_point connected_at{};
+    Clock::time_point last_request{};  // last complete request line (connect time before one)
+    double tokens = 0.0;               // rate limit bucket
+    Clock::time_point refill_at{};
+    bool rate_noticed = false;         // one notice per burst over the rate
   };
   void run();
   void accept_clients();
   void reap_hung_up_clients();
-  bool read_client(Client& c);
+  bool evict_longest_idle(const ClientInfo& for_whom);
+  [[nodiscard]] bool has_eviction_candidate() const;
+  void drop_idle_clients(Clock::time_point now);
+  enum class ReadResult { kDrained, kMore, kClosed };  // EAGAIN / budget used / EOF or error
+  ReadResult read_client(Client& c);    // appends up to kReadBudgetBytes to c.in
+  bool serve_pending(Client& c);        // reads + handles what it sent; false: it hung up
+  bool process_input(Client& c);        // handles up to kLinesPerRound lines; false: close
+  [[nodiscard]] bool has_complete_line(const Client& c) const;
   bool flush_client(Client& c);
   void handle_line(Client& c, const std::string& line);
   void queue(Client& c, const nlohmann::json& j);
-  void close_client(std::uint64_t id);
+  void notice(ServerNotice::Kind k, const ClientInfo& who, std::string text);
+  void emit_notices();
+  [[nodiscard]] static std::string describe(const ClientInfo& c);
 
   CommandServerOptions opt_;
   Handler handler_;
+  NoticeHandler on_notice_;
   int listen_fd_ = -1;
   int wake_pipe_[2] = {-1, -1};
   std::thread thread_;
@@ -104,6 +168,11 @@ class CommandServer {
   std::map<std::uint64_t, Client> clients_;
   std::uint64_t next_id_ = 1;
   CommandServerStats stats_;
+  std::vector<ServerNotice> pending_notices_;  // server thread only; emitted without mu_
+  double notice_tokens_ = 0.0;
+  Clock::time_point notice_refill_at_{};
+  std::uint64_t notices_suppressed_since_ = 0;  // suppressed since the last emitted notice
+  std::atomic<std::uint64_t> notices_suppressed_{0};
 };
 
 }  // namespace contour::daemon

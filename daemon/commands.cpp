@@ -66,7 +66,13 @@ json Daemon::counters_json(const LoopStatus& st) const {
     j["socket"] = {{"connections", s.connections},
                    {"requests", s.requests},
                    {"errors", s.errors},
-                   {"dropped_clients", s.dropped_clients}};
+                   {"dropped_clients", s.dropped_clients},
+                   {"dropped_idle", s.dropped_idle},
+                   {"evicted_idle", s.evicted_idle},
+                   {"rate_limited", s.rate_limited},
+                   {"oversize_buffer", s.oversize_buffer},
+                   {"notices_suppressed", s.notices_suppressed},
+                   {"clients", s.clients}};
   }
   return j;
 }

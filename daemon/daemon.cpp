@@ -143,8 +143,20 @@ void Daemon::start_components() {
   so.group = cfg_.socket.group;
   so.max_clients = static_cast<std::size_t>(cfg_.socket.max_clients);
   so.max_line_bytes = static_cast<std::size_t>(cfg_.socket.max_line_bytes);
+  so.idle_timeout_s = cfg_.socket.idle_timeout_s;
+  so.max_requests_per_s = cfg_.socket.max_requests_per_s;
+  so.max_backlog_bytes = static_cast<std::size_t>(cfg_.socket.max_buffered_bytes);
   server_ = std::make_unique<CommandServer>(
-      so, [this](const nlohmann::json& r, const ClientInfo& c) { return handle(r, c); });
+      so, [this](const nlohmann::json& r, const ClientInfo& c) { return handle(r, c); },
+      [this](const ServerNotice& n) {
+        // Server thread, no server lock held: log it and tell the `events` subscribers.
+        spdlog::warn("{}", n.text);
+        server_->publish("events", {{"event", "socket"},
+                                    {"action", to_string(n.kind)},
+                                    {"client", {{"id", n.client.id}, {"pid", n.client.pid},
+                                                {"uid", n.client.uid}, {"fd", n.client.fd}}},
+                                    {"text", n.text}});
+      });
   server_->start();
   components_ready_.store(true, std::memory_order_release);
   spdlog::info("command socket {}", so.path);
@@ -276,10 +288,50 @@ void Daemon::reload_config() {
     spdlog::warn("SIGHUP: safety.missed_tpdo_streak: changes need a restart");
   }
   if (n.machine.axes.size() != cfg_.machine.axes.size()) spdlog::warn("SIGHUP: machine: changes need a restart");
-  if (n.socket.path != cfg_.socket.path || n.socket.mode != cfg_.socket.mode) {
+  if (n.socket.path != cfg_.socket.path || n.socket.mode != cfg_.socket.mode ||
+      n.socket.group != cfg_.socket.group || n.socket.max_clients != cfg_.socket.max_clients ||
+      n.socket.max_line_bytes != cfg_.socket.max_line_bytes ||
+      n.socket.idle_timeout_s != cfg_.socket.idle_timeout_s ||
+      n.socket.max_requests_per_s != cfg_.socket.max_requests_per_s ||
+      n.socket.max_buffered_bytes != cfg_.socket.max_buffered_bytes) {
     spdlog::warn("SIGHUP: socket: changes need a restart");
   }
   if (n.bus.type != cfg_.bus.type) spdlog::warn("SIGHUP: bus: changes need a restart");
+}
+
+// SIGUSR1 = E-stop, SIGUSR2 = hold: the out-of-band path that does not go through the command
+// socket or its thread (a client stuck in a long handler, a full or flooded socket cannot delay
+// it). Main thread, after sigtimedwait: posting to the loop's command ring is all it does besides
+// logging; the loop applies it at the next cycle.
+void Daemon::out_of_band_signal(int sig, pid_t from_pid, uid_t from_uid) {
+  const bool estop = sig == SIGUSR1;
+  const char* name = estop ? "SIGUSR1" : "SIGUSR2";
+  const auto st = loop_->status();
+  std::string text;
+  if (estop) {
+    if (!loop_->post({CommandKind::kEstop})) {
+      // The ring is full only if the loop stopped taking commands: the hardware chain is the
+      // answer then; say so loudly.
+      text = std::string("E-STOP by ") + name + " from pid " + std::to_string(from_pid) + " uid " +
+             std::to_string(from_uid) + " NOT POSTED: loop command queue full";
+      spdlog::critical("{}", text);
+    } else {
+      text = std::string("E-STOP by ") + name + " from pid " + std::to_string(from_pid) + " uid " +
+             std::to_string(from_uid) + " (state " + std::string(to_string(st.state)) + ")";
+      spdlog::warn("{}", text);
+    }
+  } else if (st.state == MachineState::kRunning) {
+    const bool posted = loop_->post({CommandKind::kHold});
+    text = std::string("hold by ") + name + " from pid " + std::to_string(from_pid) + " uid " +
+           std::to_string(from_uid) + (posted ? "" : " NOT POSTED: loop command queue full");
+    spdlog::warn("{}", text);
+  } else {
+    text = std::string("hold by ") + name + " from pid " + std::to_string(from_pid) + " uid " +
+           std::to_string(from_uid) + " ignored: nothing running (state " +
+           std::string(to_string(st.state)) + ")";
+    spdlog::info("{}", text);
+  }
+  if (server_) server_->publish("events", {{"event", "log"}, {"text", text}});
 }
 
 int Daemon::run() {
@@ -290,6 +342,8 @@ int Daemon::run() {
   sigaddset(&set, SIGTERM);
   sigaddset(&set, SIGINT);
   sigaddset(&set, SIGHUP);
+  sigaddset(&set, SIGUSR1);
+  sigaddset(&set, SIGUSR2);
   sigaddset(&set, SIGPIPE);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);
   try {
@@ -319,12 +373,14 @@ int Daemon::run() {
   sigdelset(&set, SIGPIPE);
   while (!shutdown_.load()) {
     timespec ts{0, 100'000'000};
-    const int sig = sigtimedwait(&set, nullptr, &ts);
+    siginfo_t info{};
+    const int sig = sigtimedwait(&set, &info, &ts);
     if (sig == SIGTERM || sig == SIGINT) {
       spdlog::info("signal {}: shutting down", sig == SIGTERM ? "SIGTERM" : "SIGINT");
       break;
     }
     if (sig == SIGHUP) reload_config();
+    if (sig == SIGUSR1 || sig == SIGUSR2) out_of_band_signal(sig, info.si_pid, info.si_uid);
     free_released_jobs();
     if (watchdog) {
       const auto now = std::chrono::steady_clock::now();

@@ -6,6 +6,7 @@
 // permitted), planner (per program), telemetry writer, event logger, command server, spdlog's
 // async worker. All non-RT threads are created from main, which stays SCHED_OTHER.
 // Signals: SIGTERM/SIGINT -> controlled stop, drives disabled, files flushed, exit 0;
+// SIGUSR1 -> E-stop, SIGUSR2 -> hold (out of band: main thread posts to the loop, no socket);
 // SIGHUP -> re-read the config file: gains and the live safety limits (following-error band,
 // contour-error limit, stop deceleration, per-axis velocity/acceleration clamps) are validated and
 // swapped at a cycle boundary in any state, RUNNING included (ServoController::set_gains keeps the
@@ -73,6 +74,7 @@ class Daemon {
   void stop_components();
   void controlled_shutdown();
   void reload_config();
+  void out_of_band_signal(int sig, pid_t from_pid, uid_t from_uid);
   void on_event(const RtEvent& e, const std::string& text);
   void on_bus_message(const std::string& text);
   void free_released_jobs();

@@ -5,6 +5,11 @@
 //   contourd --latency-test SECONDS            RT set-up and wake-up lateness without drives
 //   contourd --config FILE --probe modbus|can|gpio [--count N] [--scan]
 //                                              commissioning probe: JSON lines, no loop (probe.hpp)
+// Signals (daemon.hpp): SIGTERM/SIGINT controlled stop and exit, SIGHUP reload, SIGUSR1 E-stop,
+// SIGUSR2 hold (out of band: not through the command socket).
+#include <pthread.h>
+#include <signal.h>
+
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <optional>
@@ -71,6 +76,16 @@ int main(int argc, char** argv) {
   if (config_path.empty()) {
     std::fprintf(stderr, "contourd: --config FILE is required\n");
     return 2;
+  }
+  if (!check_only && probe_kind.empty()) {
+    // SIGUSR1 (E-stop) and SIGUSR2 (hold) are taken by Daemon::run with sigtimedwait; blocked from
+    // here so that one sent during start-up is applied once the loop runs instead of killing the
+    // process (their default action).
+    sigset_t oob;
+    sigemptyset(&oob);
+    sigaddset(&oob, SIGUSR1);
+    sigaddset(&oob, SIGUSR2);
+    pthread_sigmask(SIG_BLOCK, &oob, nullptr);
   }
   contour::config::Config cfg;
   try {
