@@ -76,8 +76,20 @@ std::optional<std::uint32_t> opt_u32(Section& s, const std::string& key) {
 }
 
 // Reads the node keys present in `s` on top of `base`.
-BusNodeConfig parse_node(Section& s, const BusNodeConfig& base, bool spindle) {
+BusNodeConfig parse_node(Section& s, const BusNodeConfig& base, bool spindle,
+                         const std::map<std::string, DriveProfile>& profiles) {
   BusNodeConfig n = base;
+  {
+    const std::string name = s.string("profile", base.profile.name);
+    if (auto it = profiles.find(name); it != profiles.end()) {
+      n.profile = it->second;
+    } else {
+      std::string known;
+      for (const auto& kv : profiles) known += (known.empty() ? "" : ", ") + kv.first;
+      s.error("profile", "unknown drive profile '" + name + "' (known: " + known +
+                             "; define it in bus.profiles or bus.profile_files)");
+    }
+  }
   const std::vector<std::string> modes =
       spindle ? std::vector<std::string>{"csv", "pv"} : std::vector<std::string>{"csv", "csp"};
   n.mode = s.choice("mode", base.mode, modes);
@@ -104,6 +116,20 @@ BusNodeConfig parse_node(Section& s, const BusNodeConfig& base, bool spindle) {
   const bool mode_changed = n.mode != base.mode;
   n.rpdo = parse_pdo_list(s, "rpdo", mode_changed ? default_rpdo(n.mode) : base.rpdo);
   n.tpdo = parse_pdo_list(s, "tpdo", base.tpdo);
+  // The master maps everything into RPDO1/TPDO1: it must fit the drive's PDO.
+  const struct {
+    const char* key;
+    const std::vector<BusPdoEntry>& map;
+    int max;
+  } checks[2] = {{"rpdo", n.rpdo, n.profile.rpdo_max_entries},
+                 {"tpdo", n.tpdo, n.profile.tpdo_max_entries}};
+  for (const auto& c : checks) {
+    if (static_cast<int>(c.map.size()) <= c.max) continue;
+    s.error(s.has(c.key) ? c.key : "profile",
+            std::string(c.key) + " maps " + std::to_string(c.map.size()) +
+                " objects, drive profile '" + n.profile.name + "' allows " +
+                std::to_string(c.max) + " per PDO (" + c.key + "_max_entries)");
+  }
   return n;
 }
 
@@ -120,16 +146,56 @@ BusConfig parse_bus(Section& s) {
   b.sdo_timeout_ms = static_cast<int>(s.integer("sdo_timeout_ms", 500, 10, 10000));
   b.sdo_retries = static_cast<int>(s.integer("sdo_retries", 2, 0, 10));
 
+  b.profiles = builtin_drive_profiles();
+  s.accept("profile_files");
+  if (s.has("profile_files")) {
+    const YAML::Node files = s.node()["profile_files"];
+    const std::string path = s.path().empty() ? "profile_files" : s.path() + ".profile_files";
+    if (!files.IsSequence()) {
+      s.diag().error(files, path, "expected a list of file names");
+    } else {
+      const std::string& src = s.diag().file();
+      const auto slash = src.rfind('/');
+      const std::string dir = slash == std::string::npos ? "" : src.substr(0, slash + 1);
+      for (std::size_t i = 0; i < files.size(); ++i) {
+        const std::string p = path + "[" + std::to_string(i) + "]";
+        if (!files[i].IsScalar() || files[i].Scalar().empty()) {
+          s.diag().error(files[i], p, "expected a file name");
+          continue;
+        }
+        const std::string f = files[i].Scalar();
+        b.profile_files.push_back(f);
+        try {
+          for (auto& [name, prof] : load_drive_profile_file(f.front() == '/' ? f : dir + f)) {
+            const auto builtin = builtin_drive_profiles();
+            if (b.profiles.count(name) != 0 && builtin.count(name) == 0)
+              s.diag().error(files[i], p, "profile '" + name + "' is defined twice");
+            else
+              b.profiles[name] = prof;
+          }
+        } catch (const ConfigError& e) {
+          for (const auto& m : e.errors()) s.diag().error(files[i], p, m);
+        }
+      }
+    }
+  }
+  {
+    Section ps = s.child("profiles");
+    parse_drive_profiles(ps, b.profiles);
+    ps.finish();
+  }
+
   BusNodeConfig base;
+  base.profile = b.profiles.at("generic");
   base.rpdo = default_rpdo("csv");
   base.tpdo = {{0x6041, 0, 16}, {0x6064, 0, 32}};
   {
     Section d = s.child("drives");
-    b.drive_defaults = parse_node(d, base, false);
+    b.drive_defaults = parse_node(d, base, false, b.profiles);
     d.finish();
   }
   for (Section& o : s.list("nodes")) {
-    BusNodeConfig n = parse_node(o, b.drive_defaults, false);
+    BusNodeConfig n = parse_node(o, b.drive_defaults, false, b.profiles);
     n.node_id = static_cast<int>(o.required_integer("node_id", 1, 127));
     std::vector<std::string> keys;
     for (const auto& kv : o.node()) keys.push_back(kv.first.as<std::string>());
@@ -145,7 +211,7 @@ BusConfig parse_bus(Section& s) {
       sbase.sync_every = 10;  // a spindle speed changes slowly: keep the bus for the axes
       sbase.rpdo = default_rpdo("csv");
       sbase.tpdo = {{0x6041, 0, 16}, {0x606C, 0, 32}};
-      BusNodeConfig n = parse_node(sp, sbase, true);
+      BusNodeConfig n = parse_node(sp, sbase, true, b.profiles);
       n.node_id = static_cast<int>(sp.required_integer("node_id", 1, 127));
       n.role = "spindle";
       b.spindle = n;

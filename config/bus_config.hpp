@@ -12,17 +12,21 @@
 //     sdo_retries: 2
 // (The TPDO receive deadline is loop.tpdo_deadline_us, the missed-TPDO streak that faults is
 // safety.missed_tpdo_streak, the SYNC period is loop.period_us.)
-//     drives: {mode: csv, heartbeat_ms: 50, heartbeat_timeout_ms: 200, sync_window_us: 0,
+//     profile_files: [drives/acme.yaml]   # drive profiles (config/drive_profiles.hpp), relative
+//     profiles: {acme-x1: {rpdos: 1, ...}} #   to this file, and inline
+//     drives: {profile: generic, mode: csv, heartbeat_ms: 50, heartbeat_timeout_ms: 200, sync_window_us: 0,
 //              quick_stop_option: 2, quick_stop_decel: 2000000, rpdo: [...], tpdo: [...]}
 //     nodes: [{node_id: 2, mode: csp, identity: {vendor_id: 0x1234}}]   # per-node overrides
 //     spindle: {node_id: 4, mode: csv, sync_every: 10, ...}
 // Node-ids of the axes come from machine.axes[].node_id. PDO entries are "0xIIII" (size from
 // the CiA 402 object table) or "0xIIII:SS:BITS".
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "config/drive_profiles.hpp"
 #include "config/machine_config.hpp"
 #include "config/yaml_reader.hpp"
 
@@ -52,6 +56,7 @@ struct BusNodeConfig {
   int quick_stop_option = 2;      // 0x605A
   std::int64_t quick_stop_decel = 2000000;  // 0x6085, counts/s^2 (drive units)
   BusIdentity identity;
+  DriveProfile profile;           // resolved from `profile: NAME` (default generic)
   std::vector<BusPdoEntry> rpdo;  // RPDO1 mapping (master -> drive)
   std::vector<BusPdoEntry> tpdo;  // TPDO1 mapping (drive -> master)
 };
@@ -65,6 +70,8 @@ struct BusConfig {
   int boot_timeout_ms = 2000;
   int sdo_timeout_ms = 500;
   int sdo_retries = 2;
+  std::vector<std::string> profile_files;        // as written (relative to the config file)
+  std::map<std::string, DriveProfile> profiles;  // built-ins, files, then bus.profiles
   BusNodeConfig drive_defaults;
   std::vector<BusNodeConfig> node_overrides;  // only keys present override
   std::vector<std::vector<std::string>> override_keys;  // keys present per override

@@ -6,7 +6,7 @@
 #include <stdexcept>
 
 #include "drivers/can/socket_can.hpp"
-#include "drivers/canopen/master_from_config.hpp"
+#include "daemon/canopen_master_config.hpp"
 
 namespace contour::daemon {
 
@@ -60,7 +60,7 @@ void CanopenBus::init(const config::Config& cfg) {
     counts_per_mm_[i] = axes[i].counts_per_mm;
   }
   axes_ = static_cast<int>(axes.size());
-  mcfg_ = co::master_config_from(cfg);  // axes first, in machine order, then the spindle
+  mcfg_ = master_config_from(cfg);  // axes first, in machine order, then the spindle
   for (std::size_t i = 0; i < mcfg_.nodes.size(); ++i) {
     if (mcfg_.nodes[i].name == "spindle") spindle_index_ = static_cast<int>(i);
   }
@@ -287,7 +287,10 @@ std::string CanopenBus::describe() const {
   for (std::size_t i = 0; i < mcfg_.nodes.size(); ++i) {
     const auto& n = mcfg_.nodes[i];
     if (static_cast<int>(i) == spindle_index_) continue;
-    s += " " + std::to_string(n.node_id) + "(" + n.name + ")";
+    s += " " + std::to_string(n.node_id) + "(" + n.name;
+    // Only a profile other than the default is worth a word here (the start-up log has all).
+    if (n.quirks.profile != "generic") s += ", drive profile " + n.quirks.profile;
+    s += ")";
   }
   if (spindle_index_ >= 0) {
     s += ", spindle node " +

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Fails if control/ includes an OS, thread, logging, YAML or drivers/daemon header, or if
-# drivers/ and control/ include each other. control/ is Eigen + the C++ standard library only.
+# Fails if control/ includes an OS, thread, logging, YAML or drivers/daemon header, if
+# drivers/ and control/ include each other, or if drivers/ includes anything above it (config/,
+# daemon/, tools/: the mapping from config to driver settings is the composition root's, daemon/).
+# control/ is Eigen + the C++ standard library only.
 set -u
 root=${1:-$(dirname "$0")/..}
 cd "$root" || exit 2
@@ -11,9 +13,14 @@ while IFS= read -r hit; do
   bad=1
 done < <(grep -nHE "$forbidden" control/*.hpp control/*.cpp 2>/dev/null)
 while IFS= read -r hit; do
-  echo "layering: drivers/ must not include control/: $hit"
+  echo "layering: drivers/ must not include control/, config/, daemon/ or tools/: $hit"
   bad=1
-done < <(grep -rnHE '^[[:space:]]*#[[:space:]]*include[[:space:]]*"(control|daemon)/' drivers 2>/dev/null)
+done < <(grep -rnHE '^[[:space:]]*#[[:space:]]*include[[:space:]]*[<"](control|config|daemon|tools)/' drivers 2>/dev/null)
+while IFS= read -r hit; do
+  echo "layering: drivers/ must not use YAML (config is mapped by daemon/): $hit"
+  bad=1
+done < <(grep -rnHE '^[[:space:]]*#[[:space:]]*include[[:space:]]*[<"]yaml-cpp/' drivers 2>/dev/null)
 n=$(ls control/*.hpp control/*.cpp 2>/dev/null | wc -l)
-if [ "$bad" = 0 ]; then echo "layering: OK ($n files in control/ checked)"; fi
+m=$(find drivers -name '*.[ch]pp' 2>/dev/null | wc -l)
+if [ "$bad" = 0 ]; then echo "layering: OK ($n files in control/, $m in drivers/ checked)"; fi
 exit $bad

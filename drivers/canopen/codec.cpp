@@ -133,6 +133,7 @@ CanFrame SdoTransfer::start_download(std::uint8_t node_id, std::uint16_t index, 
   node_ = node_id;
   index_ = index;
   sub_ = sub;
+  expedited_only_ = false;
   data_.assign(data.begin(), data.end());
   offset_ = 0;
   toggle_ = false;
@@ -155,7 +156,9 @@ CanFrame SdoTransfer::start_download(std::uint8_t node_id, std::uint16_t index, 
   return f;
 }
 
-CanFrame SdoTransfer::start_upload(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub) {
+CanFrame SdoTransfer::start_upload(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub,
+                                   bool expedited_only) {
+  expedited_only_ = expedited_only;
   node_ = node_id;
   index_ = index;
   sub_ = sub;
@@ -236,6 +239,7 @@ std::optional<CanFrame> SdoTransfer::on_frame(const CanFrame& f) {
         phase_ = Phase::kNone;
         return std::nullopt;
       }
+      if (expedited_only_) return fail(0x06010000);
       size_known_ = size_ind;
       size_indicated_ = size_ind ? get_u32(&f.data[4]) : 0;
       phase_ = Phase::kUlSegment;

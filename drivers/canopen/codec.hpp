@@ -86,7 +86,10 @@ class SdoTransfer {
   // Returns the first request frame (COB 0x600+node).
   CanFrame start_download(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub,
                           std::span<const std::uint8_t> data);
-  CanFrame start_upload(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub);
+  // expedited_only: a server answering with a segmented upload is aborted by the client with
+  // 0x06010000 (unsupported access) instead of being asked for segments.
+  CanFrame start_upload(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub,
+                        bool expedited_only = false);
 
   // Handles a frame on 0x580+node. Returns the next request to send (segment or segment
   // request, or an abort the client raises on a protocol error), or nullopt when none.
@@ -119,6 +122,7 @@ class SdoTransfer {
   bool toggle_ = false;
   std::uint32_t size_indicated_ = 0;
   bool size_known_ = false;
+  bool expedited_only_ = false;
   std::uint32_t abort_code_ = 0;
   bool abort_from_server_ = false;
 };

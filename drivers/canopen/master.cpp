@@ -28,7 +28,24 @@ std::string object_name(std::uint16_t index, std::uint8_t sub) {
   return b;
 }
 
+constexpr std::uint16_t kOptionalObjects[] = {0x1006, 0x1007, 0x1008, 0x1016,
+                                              0x605A, 0x6085, 0x60C2};
+
+bool skipped(const NodeSetup& n, std::uint16_t index, std::uint8_t sub) {
+  for (const auto& o : n.quirks.skip)
+    if (o.matches(index, sub)) return true;
+  return false;
+}
+
+std::string entries_text(const PdoMapping& m) {
+  std::string s;
+  for (std::size_t k = 0; k < m.count; ++k) s += (k ? ", " : "") + hex(m.entries[k].index, 4);
+  return s;
+}
+
 }  // namespace
+
+std::span<const std::uint16_t> optional_objects() noexcept { return kOptionalObjects; }
 
 std::vector<CanFilter> master_rx_filters(const MasterConfig& cfg) {
   std::vector<CanFilter> f;
@@ -71,6 +88,27 @@ Master::Master(CanBus& bus, MasterConfig cfg, Log log_fn)
     }
     if (n.rpdo.find(0x6040) < 0) throw StartupError(who + ": RPDO must map 0x6040 controlword");
     if (n.tpdo.find(0x6041) < 0) throw StartupError(who + ": TPDO must map 0x6041 statusword");
+    const DriveQuirks& q = n.quirks;
+    const std::string prof = " (drive profile '" + q.profile + "')";
+    if (q.rpdos < 1 || q.rpdos > 4 || q.tpdos < 1 || q.tpdos > 4)
+      throw StartupError(who + ": the drive must have 1 to 4 RPDOs and TPDOs" + prof);
+    // The master maps everything it needs into RPDO1/TPDO1; a drive whose PDOs take fewer
+    // entries cannot be driven with this mapping.
+    if (n.rpdo.count > q.rpdo_max_entries)
+      throw StartupError(who + ": RPDO1 needs " + std::to_string(n.rpdo.count) + " entries (" +
+                         entries_text(n.rpdo) + "), the drive maps at most " +
+                         std::to_string(q.rpdo_max_entries) + prof);
+    if (n.tpdo.count > q.tpdo_max_entries)
+      throw StartupError(who + ": TPDO1 needs " + std::to_string(n.tpdo.count) + " entries (" +
+                         entries_text(n.tpdo) + "), the drive maps at most " +
+                         std::to_string(q.tpdo_max_entries) + prof);
+    for (const auto& o : q.skip) {
+      bool ok = false;
+      for (std::uint16_t k : kOptionalObjects) ok = ok || k == o.index;
+      if (!ok)
+        throw StartupError(who + ": object " + hex(o.index, 4) +
+                           " is mandatory for this master and cannot be skipped" + prof);
+    }
     const int every = n.sync_every < 1 ? 1 : n.sync_every;
     frames.push_back({static_cast<int>(n.rpdo.bytes()), every});
     frames.push_back({static_cast<int>(n.tpdo.bytes()), every});
@@ -113,9 +151,15 @@ std::vector<std::uint8_t> Master::run_sdo(std::uint8_t node_id, std::uint16_t in
   const std::string what = node_label(node_id) + ": SDO " + (upload ? "upload " : "download ") +
                            object_name(index, sub);
   SdoTransfer t;
+  const int node_index = index_of(node_id);
+  const bool expedited_only =
+      node_index >= 0 && cfg_.nodes[static_cast<std::size_t>(node_index)].quirks.expedited_only;
+  if (expedited_only && !upload && data.size() > 4)
+    throw StartupError(what + ": " + std::to_string(data.size()) +
+                       " bytes need a segmented transfer, the drive takes expedited SDO only");
   const std::int64_t timeout_ns = static_cast<std::int64_t>(cfg_.sdo_timeout_ms) * 1000000LL;
   for (int attempt = 0; attempt <= cfg_.sdo_retries; ++attempt) {
-    CanFrame req = upload ? t.start_upload(node_id, index, sub)
+    CanFrame req = upload ? t.start_upload(node_id, index, sub, expedited_only)
                           : t.start_download(node_id, index, sub, data);
     if (bus_.send(req) != SendResult::kOk) throw StartupError(what + ": send failed");
     std::int64_t deadline = mono_ns() + timeout_ns;
@@ -136,10 +180,18 @@ std::vector<std::uint8_t> Master::run_sdo(std::uint8_t node_id, std::uint16_t in
     }
     switch (t.status()) {
       case SdoTransfer::Status::kDone: return t.data();
-      case SdoTransfer::Status::kAborted:
-        throw StartupError(what + ": " + (t.abort_from_server() ? "aborted by the drive: "
-                                                                   : "aborted by the master: ") +
-                           sdo_abort_text(t.abort_code()));
+      case SdoTransfer::Status::kAborted: {
+        const bool refused_segmented = expedited_only && !t.abort_from_server() &&
+                                       t.abort_code() == 0x06010000;
+        throw SdoAbortError(what + ": " +
+                                (t.abort_from_server() ? "aborted by the drive: "
+                                                       : "aborted by the master: ") +
+                                sdo_abort_text(t.abort_code()) +
+                                (refused_segmented ? " (the drive answered with a segmented "
+                                                     "upload; its profile says expedited only)"
+                                                   : ""),
+                            t.abort_code(), t.abort_from_server());
+      }
       default: break;
     }
     bus_.send(t.timeout_abort());
@@ -216,10 +268,52 @@ void Master::configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m) {
     sdo_download_u32(id, map, static_cast<std::uint8_t>(k + 1), m.entries[k].mapping_word());
   sdo_download_u8(id, map, 0, static_cast<std::uint8_t>(m.count));
   sdo_download_u32(id, comm, 1, cob);
-  // PDOs 2..4 off, so that only the configured traffic is on the bus.
-  for (std::uint16_t k = 1; k < 4; ++k)
+  // The drive's other PDOs off, so that only the configured traffic is on the bus (a drive with
+  // one PDO per direction has no 0x1401/0x1801: nothing to switch off).
+  const std::uint16_t have = rx ? n.quirks.rpdos : n.quirks.tpdos;
+  for (std::uint16_t k = 1; k < have && k < 4; ++k)
     sdo_download_u32(id, static_cast<std::uint16_t>(comm + k), 1,
                      0x80000000u | ((rx ? kCobRpdo[k] : kCobTpdo[k]) + id));
+}
+
+namespace {
+bool missing_object_abort(const SdoAbortError& e) {
+  return e.from_server() && (e.code() == 0x06020000 || e.code() == 0x06090011);
+}
+}  // namespace
+
+bool Master::optional_download(const NodeSetup& n, std::uint16_t index, std::uint8_t sub,
+                               std::span<const std::uint8_t> data) {
+  if (skipped(n, index, sub)) {
+    log(node_label(n.node_id) + ": " + object_name(index, sub) + " not written (drive profile '" +
+        n.quirks.profile + "' has no such object)");
+    return false;
+  }
+  try {
+    sdo_download(n.node_id, index, sub, data);
+    return true;
+  } catch (const SdoAbortError& e) {
+    if (!missing_object_abort(e) || index == 0x1016) throw;
+    log(std::string(e.what()) + ": optional object, skipped");
+    return false;
+  }
+}
+
+std::optional<std::vector<std::uint8_t>> Master::optional_upload(const NodeSetup& n,
+                                                                 std::uint16_t index,
+                                                                 std::uint8_t sub) {
+  if (skipped(n, index, sub)) {
+    log(node_label(n.node_id) + ": " + object_name(index, sub) + " not read (drive profile '" +
+        n.quirks.profile + "' has no such object)");
+    return std::nullopt;
+  }
+  try {
+    return sdo_upload(n.node_id, index, sub);
+  } catch (const SdoAbortError& e) {
+    if (!missing_object_abort(e)) throw;
+    log(std::string(e.what()) + ": optional object, skipped");
+    return std::nullopt;
+  }
 }
 
 void Master::configure_node(const NodeSetup& n) {
@@ -242,17 +336,38 @@ void Master::configure_node(const NodeSetup& n) {
       throw StartupError(who + ": identity: 0x1018:0" + std::to_string(s) + " " + names[s - 1] +
                          " " + hex(v, 8) + ", expected " + hex(**expect[s - 1], 8));
   }
-  const auto name = sdo_upload(id, 0x1008, 0);
-  log(who + ": device \"" + std::string(name.begin(), name.end()) + "\", type " +
-      hex(device_type, 8));
+  // The device name is a visible-string of any length: a segmented upload, which an
+  // expedited-only drive cannot serve. It is only logged.
+  std::optional<std::vector<std::uint8_t>> name;
+  if (n.quirks.expedited_only)
+    log(who + ": 0x1008:00 device name not read (drive profile '" + n.quirks.profile +
+        "': expedited SDO only)");
+  else
+    name = optional_upload(n, 0x1008, 0);
+  log(who + ": device \"" + (name ? std::string(name->begin(), name->end()) : std::string("?")) +
+      "\", type " + hex(device_type, 8) + ", drive profile '" + n.quirks.profile + "', feedback " +
+      (n.quirks.feedback == FeedbackTiming::kAfterStep ? "sampled after the drive's step"
+                                                       : "sampled at SYNC"));
   sdo_download_u16(id, 0x1017, 0, n.heartbeat_ms);
   if (cfg_.master_heartbeat_ms > 0) {
     // Consumer time 3x the master's period: a drive stops on its own if the daemon dies.
     const std::uint32_t t = std::min<std::uint32_t>(65535u, 3u * cfg_.master_heartbeat_ms);
-    sdo_download_u32(id, 0x1016, 1, (static_cast<std::uint32_t>(cfg_.master_node_id) << 16) | t);
+    std::uint8_t b[4];
+    put_u32(b, (static_cast<std::uint32_t>(cfg_.master_node_id) << 16) | t);
+    if (!optional_download(n, 0x1016, 1, b))
+      log(who + ": WARNING: no heartbeat consumer: this drive does not stop by itself when the "
+                "master dies (the E-stop chain must)");
   }
-  sdo_download_u32(id, 0x1006, 0, cfg_.period_us);
-  if (n.sync_window_us > 0) sdo_download_u32(id, 0x1007, 0, n.sync_window_us);
+  {
+    std::uint8_t b[4];
+    put_u32(b, cfg_.period_us);
+    optional_download(n, 0x1006, 0, b);
+  }
+  if (n.sync_window_us > 0) {
+    std::uint8_t b[4];
+    put_u32(b, n.sync_window_us);
+    optional_download(n, 0x1007, 0, b);
+  }
   if (n.mode != DriveMode::kProfileVelocity) {
     // 0x60C2 {value, exponent}: the smallest exponent (finest unit) that fits in a u8.
     std::uint32_t v = cfg_.period_us;
@@ -261,11 +376,22 @@ void Master::configure_node(const NodeSetup& n) {
       v /= 10;
       ++e;
     }
-    sdo_download_u8(id, 0x60C2, 1, static_cast<std::uint8_t>(v));
-    sdo_download_u8(id, 0x60C2, 2, static_cast<std::uint8_t>(e));
+    const std::uint8_t value[1] = {static_cast<std::uint8_t>(v)};
+    const std::uint8_t exponent[1] = {static_cast<std::uint8_t>(e)};
+    if (optional_download(n, 0x60C2, 1, value)) optional_download(n, 0x60C2, 2, exponent);
   }
-  sdo_download_u16(id, 0x605A, 0, static_cast<std::uint16_t>(n.quick_stop_option));
-  sdo_download_u32(id, 0x6085, 0, n.quick_stop_decel);
+  // Quick stop: without 0x605A/0x6085 the drive uses its built-in reaction and deceleration
+  // for the quick-stop controlword; the master sends the same controlword either way.
+  {
+    std::uint8_t b[2];
+    put_u16(b, static_cast<std::uint16_t>(n.quick_stop_option));
+    optional_download(n, 0x605A, 0, b);
+  }
+  {
+    std::uint8_t b[4];
+    put_u32(b, n.quick_stop_decel);
+    optional_download(n, 0x6085, 0, b);
+  }
   sdo_download_u8(id, 0x6060, 0, static_cast<std::uint8_t>(n.mode));
   const auto disp = sdo_upload(id, 0x6061, 0);
   if (disp.size() != 1 || static_cast<std::int8_t>(disp[0]) != static_cast<std::int8_t>(n.mode))

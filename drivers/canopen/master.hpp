@@ -33,6 +33,43 @@ namespace contour::drivers::canopen {
 
 enum class DriveMode : std::int8_t { kProfileVelocity = 3, kCsp = 8, kCsv = 9 };
 
+// When the drive samples what its TPDO carries (statusword, 0x6064, 0x606C) relative to its own
+// step on a SYNC: kAtSync = on the SYNC, before it applies the RPDO received in the previous
+// cycle (the feedback is one period older: the CAN link adds one period to the loop's delay);
+// kAfterStep = after it applied that RPDO and stepped (no extra period). The master reports it
+// (log, NodeSetup); the loop's delay model (control: delay_cycles) is configured separately.
+enum class FeedbackTiming : std::uint8_t { kAtSync, kAfterStep };
+
+// One object of the object dictionary; sub = kAllSubs stands for every sub-index of `index`.
+struct ObjectRef {
+  static constexpr int kAllSubs = -1;
+  std::uint16_t index = 0;
+  int sub = kAllSubs;
+  [[nodiscard]] bool matches(std::uint16_t i, std::uint8_t s) const noexcept {
+    return index == i && (sub == kAllSubs || sub == s);
+  }
+};
+
+// What a drive model lacks or limits (a drive profile, config/drive_profiles.hpp, mapped by the
+// composition root). The default is a complete CiA 301/402 drive (today's contour-machine-sim).
+struct DriveQuirks {
+  std::string profile = "generic";  // name, for messages
+  // Optional objects the drive does not have: the master never reads or writes them. Only
+  // optional_objects() may be listed (the constructor refuses others).
+  std::vector<ObjectRef> skip;
+  std::uint8_t rpdos = 4, tpdos = 4;  // PDOs the drive has (1..4); the master disables 2..n
+  std::uint8_t rpdo_max_entries = 8, tpdo_max_entries = 8;  // mapping entries per PDO (1..8)
+  bool expedited_only = false;  // SDO: no segmented transfers (0x1008 is then not read)
+  FeedbackTiming feedback = FeedbackTiming::kAtSync;
+};
+
+// The objects start_up() may do without: skipped when the profile lists them, and skipped with a
+// log line when the drive answers 0x06020000 (object does not exist) or 0x06090011 (sub-index
+// does not exist). 0x1016 (heartbeat consumer) is optional only by profile: a drive that lacks
+// it does not stop when the master dies, so an unexpected abort on it stops the boot.
+// {0x1006, 0x1007, 0x1008, 0x1016, 0x605A, 0x6085, 0x60C2}.
+std::span<const std::uint16_t> optional_objects() noexcept;
+
 struct NodeSetup {
   std::uint8_t node_id = 0;
   std::string name;  // "X", "spindle": used in messages
@@ -46,6 +83,7 @@ struct NodeSetup {
   std::optional<std::uint32_t> device_type, vendor_id, product_code, revision;
   PdoMapping rpdo;  // RPDO1, must contain 0x6040
   PdoMapping tpdo;  // TPDO1, must contain 0x6041
+  DriveQuirks quirks;
 };
 
 struct MasterConfig {
@@ -65,6 +103,19 @@ struct MasterConfig {
 class StartupError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
+};
+
+// An SDO transfer aborted by the drive (from_server) or by the master; `code` is the abort code.
+class SdoAbortError : public StartupError {
+ public:
+  SdoAbortError(const std::string& what, std::uint32_t code, bool from_server)
+      : StartupError(what), code_(code), from_server_(from_server) {}
+  [[nodiscard]] std::uint32_t code() const noexcept { return code_; }
+  [[nodiscard]] bool from_server() const noexcept { return from_server_; }
+
+ private:
+  std::uint32_t code_;
+  bool from_server_;
 };
 
 enum class CycleStatus : std::uint8_t { kOk, kFault };
@@ -126,7 +177,8 @@ class Master {
  public:
   using Log = std::function<void(const std::string&)>;
 
-  // Validates the mappings and the bus load (throws StartupError above the ceiling).
+  // Validates the mappings against each node's quirks (entry limits, skippable objects) and the
+  // bus load (throws StartupError naming the node, or above the load ceiling).
   Master(CanBus& bus, MasterConfig cfg, Log log = {});
 
   // Non-RT. NMT reset communication, boot-up wait, per-node SDO configuration, NMT start.
@@ -134,7 +186,10 @@ class Master {
   void start_up();
 
   // Non-RT SDO client (timeout sdo_timeout_ms, retries on timeout; server aborts are not
-  // retried). Throws StartupError("node 2 (Y): SDO download 0x6060:00: 0x06090030 ...").
+  // retried). Throws SdoAbortError("node 2 (Y): SDO download 0x6060:00: 0x06090030 ...") on an
+  // abort, StartupError otherwise. For a node whose quirks say expedited_only, a download of more
+  // than 4 bytes is refused before anything is sent, and an upload the drive starts as a
+  // segmented transfer is aborted by the master (0x06010000): never a segmented transfer.
   std::vector<std::uint8_t> sdo_upload(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub);
   void sdo_download(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub,
                     std::span<const std::uint8_t> data);
@@ -177,6 +232,12 @@ class Master {
   void push_event(const MasterEvent& e) noexcept;
   void configure_node(const NodeSetup& n);
   void configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m);
+  // Optional object write/read: skipped when the quirks list it; a 0x06020000/0x06090011 abort
+  // from the drive is logged and skipped. Returns whether the transfer happened.
+  bool optional_download(const NodeSetup& n, std::uint16_t index, std::uint8_t sub,
+                         std::span<const std::uint8_t> data);
+  std::optional<std::vector<std::uint8_t>> optional_upload(const NodeSetup& n, std::uint16_t index,
+                                                           std::uint8_t sub);
   std::vector<std::uint8_t> run_sdo(std::uint8_t node_id, std::uint16_t index, std::uint8_t sub,
                                     bool upload, std::span<const std::uint8_t> data);
   std::string node_label(std::uint8_t node_id) const;

@@ -25,7 +25,7 @@
 #include "config/config.hpp"
 #include "drivers/can/socket_can.hpp"
 #include "drivers/canopen/master.hpp"
-#include "drivers/canopen/master_from_config.hpp"
+#include "daemon/canopen_master_config.hpp"
 
 namespace contour::test {
 
@@ -34,10 +34,10 @@ inline const char* kIface = "vcan0";
 // contour-machine-sim as a child process; waits for its "ready:" line.
 class MachineSim {
  public:
-  explicit MachineSim(std::vector<std::string> extra = {}) {
+  explicit MachineSim(std::vector<std::string> extra = {},
+                      const std::string& config = CONTOUR_SOURCE_DIR "/config/hil.yaml") {
     const std::string bin = CONTOUR_BINARY_DIR "/tools/contour-machine-sim";
-    std::vector<std::string> args = {bin, "--config", CONTOUR_SOURCE_DIR "/config/hil.yaml",
-                                     "--can", kIface};
+    std::vector<std::string> args = {bin, "--config", config, "--can", kIface};
     args.insert(args.end(), extra.begin(), extra.end());
     int out[2];
     if (::pipe(out) != 0) throw std::runtime_error("pipe");
@@ -167,7 +167,7 @@ inline config::Config hil_config() {
 // The master for hil.yaml; the TPDO deadline is widened to 200 ms because the VM has heavy steal
 // time (collect() returns as soon as every TPDO is in, so this does not slow the loop).
 inline drivers::canopen::MasterConfig hil_master_config(const config::Config& c) {
-  auto m = drivers::canopen::master_config_from(c);
+  auto m = daemon::master_config_from(c);
   m.tpdo_deadline_us = 200000;
   return m;
 }

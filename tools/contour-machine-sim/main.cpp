@@ -1,5 +1,8 @@
-// contour-machine-sim --config FILE --can IFACE [--modbus HOST:PORT] [fault flags]
+// contour-machine-sim --config FILE --can IFACE [--modbus HOST:PORT] [fault flags] [quirk flags]
 //                     [--storm SEED [--storm-interval SYNCS] [--storm-kinds LIST]]
+// Quirks (drives that are not a complete CiA 301/402 drive, sim_drive.hpp SimQuirks):
+// --missing-object NODE:INDEX[:SUB], --pdos NODE:COUNT[:MAX_ENTRIES], --expedited-only NODE,
+// --tpdo-sampling NODE:sync|after_step (default: the node's drive profile, bus.*.profile).
 // The simulated machine for HIL: one process answering every bus node of the config (axes from
 // machine.axes[].node_id, the spindle from bus.spindle.node_id) as CiA 402 drives on SocketCAN,
 // advancing one plant step per SYNC (lockstep). Prints "ready: ..." on stdout once listening and a
@@ -63,6 +66,8 @@ int main(int argc, char** argv) {
   CLI::App app{"contour-machine-sim: simulated CiA 402 machine on SocketCAN (lockstep with SYNC)"};
   std::string config_path, iface, modbus;
   std::vector<std::string> drop, fault, fault_motion, stop_hb, sdo_abort, malformed, drop_sdo;
+  std::vector<std::string> missing_obj, pdos, tpdo_sampling;
+  std::vector<long> expedited_only;
   app.add_option("--config", config_path, "contourd YAML config (machine, bus)")->required();
   app.add_option("--can", iface, "CAN interface, e.g. vcan0")->required();
   app.add_option("--modbus", modbus, "HOST:PORT of the dynamometer Modbus TCP server");
@@ -74,6 +79,17 @@ int main(int argc, char** argv) {
   app.add_option("--sdo-abort", sdo_abort, "NODE:INDEX:SUB[:CODE] answer this object with an abort");
   app.add_option("--drop-sdo", drop_sdo, "NODE:COUNT ignore the node's first COUNT SDO requests");
   app.add_option("--malformed", malformed, "NODE:SYNC send malformed frames at this SYNC");
+  app.add_option("--missing-object", missing_obj,
+                 "NODE:INDEX[:SUB] the node's object dictionary lacks this object (every "
+                 "sub-index without SUB); SDO access is aborted 0x06020000 / 0x06090011");
+  app.add_option("--pdos", pdos,
+                 "NODE:COUNT[:MAX_ENTRIES] the node has COUNT RPDOs and TPDOs (1..4) of at most "
+                 "MAX_ENTRIES mapped objects (1..8)");
+  app.add_option("--expedited-only", expedited_only,
+                 "NODE the node's SDO server aborts segmented transfers (0x05040001)");
+  app.add_option("--tpdo-sampling", tpdo_sampling,
+                 "NODE:sync|after_step when the node samples its TPDO: at SYNC before its step, "
+                 "or after it (default: tpdo_sampling of the node's drive profile)");
   std::uint64_t storm_seed = 0;
   long storm_interval = 5000;
   std::string storm_kinds;
@@ -189,16 +205,13 @@ int main(int argc, char** argv) {
     if (n.identity.vendor_id) s.vendor_id = *n.identity.vendor_id;
     if (n.identity.product_code) s.product_code = *n.identity.product_code;
     if (n.identity.revision) s.revision = *n.identity.revision;
+    s.quirks.tpdo_after_step = n.profile.tpdo_sampling == "after_step";
     for (const auto& ax : cfg.machine.axes) {
       if (ax.node_id != n.node_id) continue;
       s.counts_per_mm = ax.counts_per_mm;
       s.plant = ax.drive;
       s.plant.period_s = cfg.machine.period_s;
-      // The CAN transport is one period of the configured delay (see sim_drive.hpp).
-      s.plant.delay_cycles = ax.drive.delay_cycles > 0 ? ax.drive.delay_cycles - 1 : 0;
-      if (ax.drive.delay_cycles == 0)
-        std::cerr << "contour-machine-sim: axis " << ax.name
-                  << ": delay_cycles 0 cannot be matched over CAN (one period is the minimum)\n";
+      // delay_cycles is reduced below by the CAN transport's period (TPDO sampled at SYNC).
     }
     if (s.spindle) {
       s.counts_per_mm = 4096.0;  // counts per revolution
@@ -248,8 +261,45 @@ int main(int argc, char** argv) {
       auto v = parse_tuple(d, 2, 2, "--malformed");
       find(v[0]).faults.malformed_at = v[1];
     }
+    for (const auto& d : missing_obj) {
+      auto v = parse_tuple(d, 2, 3, "--missing-object");
+      if (v[1] <= 0 || v[1] > 0xFFFF || (v.size() > 2 && (v[2] < 0 || v[2] > 0xFF)))
+        throw CLI::ValidationError("--missing-object", "bad object in '" + d + "'");
+      find(v[0]).quirks.missing.push_back(
+          {static_cast<std::uint16_t>(v[1]), v.size() > 2 ? static_cast<int>(v[2]) : -1});
+    }
+    for (const auto& d : pdos) {
+      auto v = parse_tuple(d, 2, 3, "--pdos");
+      if (v[1] < 1 || v[1] > 4 || (v.size() > 2 && (v[2] < 1 || v[2] > 8)))
+        throw CLI::ValidationError("--pdos", "COUNT 1..4, MAX_ENTRIES 1..8 in '" + d + "'");
+      auto& s = find(v[0]);
+      s.quirks.pdos = static_cast<int>(v[1]);
+      if (v.size() > 2) s.quirks.pdo_max_entries = static_cast<int>(v[2]);
+    }
+    for (long n : expedited_only) find(n).quirks.expedited_only = true;
+    for (const auto& d : tpdo_sampling) {
+      const auto colon = d.find(':');
+      const std::string word = colon == std::string::npos ? "" : d.substr(colon + 1);
+      if (word != "sync" && word != "after_step")
+        throw CLI::ValidationError("--tpdo-sampling", "expected NODE:sync|after_step, got '" + d + "'");
+      auto v = parse_tuple(d.substr(0, colon), 1, 1, "--tpdo-sampling");
+      find(v[0]).quirks.tpdo_after_step = word == "after_step";
+    }
   } catch (const CLI::Error& e) {
     return app.exit(e);
+  }
+
+  // The CAN transport is one period of the configured delay when the TPDO is sampled at SYNC
+  // (see sim_drive.hpp); sampled after the step it adds none.
+  for (auto& s : setups) {
+    for (const auto& ax : cfg.machine.axes) {
+      if (ax.node_id != s.node_id || s.quirks.tpdo_after_step) continue;
+      s.plant.delay_cycles = ax.drive.delay_cycles > 0 ? ax.drive.delay_cycles - 1 : 0;
+      if (ax.drive.delay_cycles == 0)
+        std::cerr << "contour-machine-sim: axis " << ax.name
+                  << ": delay_cycles 0 cannot be matched over CAN with the TPDO sampled at SYNC "
+                     "(one period is the minimum)\n";
+    }
   }
 
   std::unique_ptr<contour::drivers::SocketCan> bus;

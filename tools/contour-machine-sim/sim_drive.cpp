@@ -50,7 +50,9 @@ void SimDrive::build_od() {
   ro(0x1016, 0, 1, 1);
   rw(0x1016, 1, 0, 4);
   rw(0x1017, 0, 0, 2);
-  for (std::uint16_t k = 0; k < 4; ++k) {
+  const auto pdos = static_cast<std::uint16_t>(std::clamp(s_.quirks.pdos, 1, 4));
+  const auto entries = static_cast<std::uint8_t>(std::clamp(s_.quirks.pdo_max_entries, 1, 8));
+  for (std::uint16_t k = 0; k < pdos; ++k) {
     const auto n = s_.node_id;
     ro(static_cast<std::uint16_t>(0x1400 + k), 0, 2, 1);
     rw(static_cast<std::uint16_t>(0x1400 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobRpdo[k] + n, 4);
@@ -60,7 +62,7 @@ void SimDrive::build_od() {
     rw(static_cast<std::uint16_t>(0x1800 + k), 2, 0xFF, 1);
     rw(static_cast<std::uint16_t>(0x1600 + k), 0, 0, 1);
     rw(static_cast<std::uint16_t>(0x1A00 + k), 0, 0, 1);
-    for (std::uint8_t e = 1; e <= 8; ++e) {
+    for (std::uint8_t e = 1; e <= entries; ++e) {
       rw(static_cast<std::uint16_t>(0x1600 + k), e, 0, 4);
       rw(static_cast<std::uint16_t>(0x1A00 + k), e, 0, 4);
     }
@@ -88,6 +90,13 @@ void SimDrive::build_od() {
   ro(0x60C2, 0, 2, 1);
   rw(0x60C2, 1, 1, 1);
   rw(0x60C2, 2, -3, 1);
+  for (const auto& m : s_.quirks.missing) {
+    for (auto it = od_.begin(); it != od_.end();) {
+      const bool hit = (it->first >> 8) == m.index &&
+                       (m.sub < 0 || static_cast<int>(it->first & 0xFF) == m.sub);
+      it = hit ? od_.erase(it) : std::next(it);
+    }
+  }
   od_defaults_ = od_;
 }
 
@@ -106,6 +115,10 @@ std::int64_t SimDrive::read_int(std::uint16_t index, std::uint8_t sub) const {
   const std::size_t bits = 8 * b.size();
   if (bits > 0 && bits < 64 && (v >> (bits - 1)) != 0) v |= ~0ULL << bits;
   return static_cast<std::int64_t>(v);
+}
+std::int64_t SimDrive::read_int_or(std::uint16_t index, std::uint8_t sub,
+                                  std::int64_t fixed) const {
+  return od_.count(key(index, sub)) != 0 ? read_int(index, sub) : fixed;
 }
 std::uint32_t SimDrive::u32(std::uint16_t index, std::uint8_t sub) const {
   return static_cast<std::uint32_t>(read_int(index, sub) & 0xFFFFFFFF);
@@ -283,15 +296,36 @@ void SimDrive::raise_fault(std::uint16_t code) {
 void SimDrive::on_sync() {
   ++syncs_;
   last_sync_wall_ns_ = now_wall_ns_;
-  const auto& fl = s_.faults;
   if (master_hb_armed_) {
     const long t_ms = static_cast<long>(u32(0x1016, 1) & 0xFFFF);
     const long limit =
         std::max<long>(1, std::lround(static_cast<double>(t_ms) * 1e-3 / s_.period_s));
     if (syncs_ - master_hb_sync_ > limit) master_heartbeat_lost();
   }
+  auto lockstep_heartbeat = [&] {
+    const auto hb_ms = read_int(0x1017, 0);
+    if (hb_ms > 0 && nmt_ == co::NmtState::kOperational) {
+      const long every =
+          std::max<long>(1, std::lround(static_cast<double>(hb_ms) * 1e-3 / s_.period_s));
+      if (syncs_ % every == 0) heartbeat();
+    }
+    if (hb_gap_left_ > 0) --hb_gap_left_;  // counted in SYNCs: the gap pauses when SYNC stops
+  };
+  if (s_.quirks.tpdo_after_step) {
+    apply_and_step();
+    sample_and_transmit();
+    lockstep_heartbeat();
+  } else {
+    sample_and_transmit();
+    lockstep_heartbeat();
+    apply_and_step();
+  }
+}
+
+void SimDrive::sample_and_transmit() {
+  const auto& fl = s_.faults;
   const bool operational = nmt_ == co::NmtState::kOperational;
-  // 1. sample and transmit (values of the state reached at the previous SYNC)
+  // sample and transmit (values of the state reached by the last step)
   const std::int64_t pos_counts =
       s_.spindle ? std::llround(spindle_rev_ * s_.counts_per_mm)
                  : std::llround(plant_.position_mm() * s_.counts_per_mm);
@@ -343,14 +377,11 @@ void SimDrive::on_sync() {
     f.dlc = 8;
     send_(f);
   }
-  // 2. lockstep heartbeat
-  const auto hb_ms = read_int(0x1017, 0);
-  if (hb_ms > 0 && operational) {
-    const long every = std::max<long>(1, std::lround(static_cast<double>(hb_ms) * 1e-3 / s_.period_s));
-    if (syncs_ % every == 0) heartbeat();
-  }
-  if (hb_gap_left_ > 0) --hb_gap_left_;  // counted in SYNCs: the gap pauses when SYNC stops
-  // 3. apply the RPDO latched since the previous SYNC
+}
+
+void SimDrive::apply_and_step() {
+  const auto& fl = s_.faults;
+  // apply the RPDO latched since the previous SYNC
   if (fl.fault_at >= 0 && syncs_ == fl.fault_at && state_ != co::Cia402State::kFault) raise_fault(fl.fault_code);
   if (injected_fault_) {
     if (state_ != co::Cia402State::kFault && state_ != co::Cia402State::kFaultReactionActive) {
@@ -372,12 +403,13 @@ void SimDrive::on_sync() {
   rx_latched_ = false;
   set_int(0x6040, 0, cw);
   const double T = s_.period_s;
-  const double decel_mm_s2 = static_cast<double>(u32(0x6085, 0)) / s_.counts_per_mm;
+  const double decel_mm_s2 =
+      static_cast<double>(read_int_or(0x6085, 0, 1000000) & 0xFFFFFFFF) / s_.counts_per_mm;
   const bool ramping = state_ == co::Cia402State::kQuickStopActive ||
                        state_ == co::Cia402State::kFaultReactionActive;
   const bool ramp_done = ramping && std::abs(v_cmd_mm_s_) < 1e-12;
   const auto before = state_;
-  state_ = co::drive_transition(state_, cw, prev_cw_, static_cast<int>(read_int(0x605A, 0)), ramp_done);
+  state_ = co::drive_transition(state_, cw, prev_cw_, static_cast<int>(read_int_or(0x605A, 0, 2)), ramp_done);
   if (before == co::Cia402State::kFault && state_ != co::Cia402State::kFault) {
     set_int(0x603F, 0, 0);
     set_int(0x1001, 0, 0);
@@ -385,7 +417,7 @@ void SimDrive::on_sync() {
     if (injected_fault_latched_) ++injected_emcy_sent_;
     injected_fault_latched_ = false;
   }
-  // 4. step the plant one period
+  // step the plant one period
   const std::int8_t mode = static_cast<std::int8_t>(read_int(0x6061, 0));
   if (s_.spindle) {
     double target = state_ == co::Cia402State::kOperationEnabled ? static_cast<double>(rx_target_) : 0.0;
@@ -570,6 +602,8 @@ void SimDrive::on_sdo(const CanFrame& f) {
       return abort(index, sub, any ? 0x06090011 : 0x06020000);
     }
     if (!e->readable) return abort(index, sub, 0x06010001);
+    if (s_.quirks.expedited_only && (e->value.size() > 4 || e->value.empty()))
+      return abort(index, sub, 0x05040001);  // no segmented upload on this drive
     if (e->value.size() <= 4 && !e->value.empty()) {
       const auto n = e->value.size();
       send_sdo(static_cast<std::uint8_t>(0x43 | ((4 - n) << 2)), index, sub, e->value.data(), n);
@@ -595,6 +629,7 @@ void SimDrive::on_sdo(const CanFrame& f) {
       send_sdo(0x60, index, sub, nullptr, 0);
       return;
     }
+    if (s_.quirks.expedited_only) return abort(index, sub, 0x05040001);
     Entry* e = find(index, sub);
     if (e == nullptr) return abort(index, sub, 0x06020000);
     if (!e->writable) return abort(index, sub, 0x06010002);

@@ -14,7 +14,14 @@
 // samples and sends its TPDO (statusword, position of step n), then applies the RPDO latched
 // since SYNC n-1 and steps the plant. The CAN transport therefore contributes one period of
 // command delay; the FeedDrive inside gets (configured delay_cycles - 1) so that the whole loop
-// has the configured delay, as contour-sim's in-process drive does.
+// has the configured delay, as contour-sim's in-process drive does. With
+// SimQuirks::tpdo_after_step the order is reversed (apply, step, then sample and send): the
+// feedback carries the step of this SYNC, the transport adds no period, and contour-machine-sim
+// gives the FeedDrive the full delay_cycles.
+//
+// Quirks (SimQuirks, contour-machine-sim --missing-object/--pdos/--expedited-only/
+// --tpdo-sampling): drives that are not a complete CiA 301/402 drive. A missing 0x605A/0x6085
+// means the built-in quick stop (option 2, 1000000 counts/s^2).
 #include <algorithm>
 #include <cstdint>
 #include <functional>
@@ -45,6 +52,18 @@ struct SimFaults {
   long drop_sdo_requests = 0;  // ignore this many SDO requests (initiate frames) from power-on
 };
 
+struct SimQuirks {
+  struct Object {
+    std::uint16_t index = 0;
+    int sub = -1;  // -1: every sub-index
+  };
+  std::vector<Object> missing;  // objects removed from the object dictionary
+  int pdos = 4;                 // RPDOs and TPDOs the drive has (1..4)
+  int pdo_max_entries = 8;      // mapping entries per PDO (1..8)
+  bool expedited_only = false;  // SDO server: segmented transfers are aborted (0x05040001)
+  bool tpdo_after_step = false;  // TPDO sampled after the step (see the header comment)
+};
+
 struct SimDriveSetup {
   std::uint8_t node_id = 1;
   std::string name = "X";
@@ -58,6 +77,7 @@ struct SimDriveSetup {
   std::uint32_t revision = 0x00010000;
   std::uint32_t serial = 0;
   SimFaults faults;
+  SimQuirks quirks;
 };
 
 class SimDrive {
@@ -105,6 +125,9 @@ class SimDrive {
   void build_od();
   void reset_communication();
   void on_sync();
+  void sample_and_transmit();  // TPDO (and --malformed burst) of this SYNC
+  void apply_and_step();       // RPDO latched since the previous SYNC, CiA 402, plant step
+  std::int64_t read_int_or(std::uint16_t index, std::uint8_t sub, std::int64_t fixed) const;
   void on_sdo(const drivers::CanFrame& f);
   void on_rpdo(const drivers::CanFrame& f);
   std::optional<std::uint32_t> write_object(std::uint16_t index, std::uint8_t sub,

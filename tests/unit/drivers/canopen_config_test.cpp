@@ -1,7 +1,7 @@
 // The `bus:` section and its adapter to the master (config/bus_config, master_from_config.hpp).
 #include <gtest/gtest.h>
 
-#include "drivers/canopen/master_from_config.hpp"
+#include "daemon/canopen_master_config.hpp"
 
 namespace co = contour::drivers::canopen;
 namespace cfg = contour::config;
@@ -10,7 +10,7 @@ TEST(BusConfig, HilYamlGivesThreeAxesAndASpindleWithTheLeanestMapping) {
   const auto c = cfg::load_config_file(CONTOUR_SOURCE_DIR "/config/hil.yaml");
   EXPECT_EQ(c.bus.type, "socketcan");
   EXPECT_EQ(c.bus.interface, "vcan0");
-  const auto m = co::master_config_from(c);
+  const auto m = contour::daemon::master_config_from(c);
   ASSERT_EQ(m.nodes.size(), 4u);
   EXPECT_EQ(m.period_us, 1000u);
   EXPECT_EQ(m.bitrate, 1000000u);
@@ -51,7 +51,7 @@ TEST(BusConfig, CspSwitchesTheDefaultRpdoToTargetPosition) {
       "machine:\n  axes:\n    - {name: X, node_id: 1}\n    - {name: Y, node_id: 2}\n"
       "bus:\n  nodes:\n    - {node_id: 2, mode: csp, identity: {vendor_id: 0x1234}}\n";
   const auto c = cfg::load_config_string(y, "t.yaml");
-  const auto m = co::master_config_from(c);
+  const auto m = contour::daemon::master_config_from(c);
   ASSERT_EQ(m.nodes.size(), 2u);
   EXPECT_EQ(m.nodes[0].mode, co::DriveMode::kCsv);
   EXPECT_EQ(m.nodes[1].mode, co::DriveMode::kCsp);

@@ -1,25 +1,44 @@
 #pragma once
-// Setup-time adapter: the validated `loop:`, `safety:`, `machine:` and `bus:` config -> MasterConfig. Header-only so
-// contour::drivers itself does not link contour::config; the composition root (daemon, tests,
-// tools) that includes this links both.
-#include <cmath>
+// Setup-time adapter (composition root): the validated `loop:`, `safety:`, `machine:` and `bus:`
+// config -> the master's MasterConfig, drive profiles -> DriveQuirks. It lives in daemon/ so that
+// drivers/ depends on nothing above it (tests/layering.sh). Header-only: a program or test that
+// links contour::config and contour::drivers can use it without contour::daemon.
+#include <cstdint>
 
 #include "config/config.hpp"
 #include "drivers/canopen/master.hpp"
 
-namespace contour::drivers::canopen {
+namespace contour::daemon {
 
-inline PdoMapping to_mapping(const std::vector<config::BusPdoEntry>& v) {
-  PdoMapping m;
+inline drivers::canopen::PdoMapping to_mapping(const std::vector<config::BusPdoEntry>& v) {
+  drivers::canopen::PdoMapping m;
   for (const auto& e : v) {
-    if (m.count >= PdoMapping::kMaxEntries) break;
-    m.entries[m.count++] = PdoEntry{e.index, e.sub, e.bits};
+    if (m.count >= drivers::canopen::PdoMapping::kMaxEntries) break;
+    m.entries[m.count++] = drivers::canopen::PdoEntry{e.index, e.sub, e.bits};
   }
   return m;
 }
 
+inline drivers::canopen::DriveQuirks to_quirks(const config::DriveProfile& p) {
+  namespace co = drivers::canopen;
+  co::DriveQuirks q;
+  q.profile = p.name;
+  for (const auto& o : p.skip_objects) q.skip.push_back(co::ObjectRef{o.index, o.sub});
+  q.rpdos = static_cast<std::uint8_t>(p.rpdos);
+  q.tpdos = static_cast<std::uint8_t>(p.tpdos);
+  q.rpdo_max_entries = static_cast<std::uint8_t>(p.rpdo_max_entries);
+  q.tpdo_max_entries = static_cast<std::uint8_t>(p.tpdo_max_entries);
+  q.expedited_only = p.sdo == "expedited_only";
+  q.feedback = p.tpdo_sampling == "after_step" ? co::FeedbackTiming::kAfterStep
+                                               : co::FeedbackTiming::kAtSync;
+  return q;
+}
+
 // Throws config::ConfigError (duplicate node-ids, ...).
-inline MasterConfig master_config_from(const config::Config& cfg) {
+inline drivers::canopen::MasterConfig master_config_from(const config::Config& cfg) {
+  using drivers::canopen::DriveMode;
+  using drivers::canopen::MasterConfig;
+  using drivers::canopen::NodeSetup;
   const config::BusConfig& bus = cfg.bus;
   const config::MachineConfig& machine = cfg.machine;
   MasterConfig c;
@@ -51,9 +70,10 @@ inline MasterConfig master_config_from(const config::Config& cfg) {
     s.revision = n.identity.revision;
     s.rpdo = to_mapping(n.rpdo);
     s.tpdo = to_mapping(n.tpdo);
+    s.quirks = to_quirks(n.profile);
     c.nodes.push_back(s);
   }
   return c;
 }
 
-}  // namespace contour::drivers::canopen
+}  // namespace contour::daemon
