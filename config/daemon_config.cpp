@@ -64,6 +64,7 @@ SocketConfig parse_socket(Section& s) {
   c.group = s.string("group", "");
   c.max_clients = static_cast<int>(s.integer("max_clients", 16, 1, 1024));
   c.max_line_bytes = static_cast<int>(s.integer("max_line_bytes", 65536, 256, 16 << 20));
+  c.max_program_bytes = static_cast<long>(s.integer("max_program_bytes", 16L << 20, 1024, 1L << 30));
   return c;
 }
 

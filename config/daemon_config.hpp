@@ -38,6 +38,8 @@ struct SocketConfig {
   std::string group;
   int max_clients = 16;
   int max_line_bytes = 65536;
+  // Largest part program `load {program}` / the chunked `upload` accepts (bytes of text).
+  long max_program_bytes = 16L << 20;
 };
 
 struct LogConfig {
