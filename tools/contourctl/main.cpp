@@ -383,7 +383,9 @@ Gains keys (gains set): axis.<x|y|z|index>.<kp|ki_per_s|kd_s|ff>=V, coupling.<cp
 
 gains save: rewrites the gain VALUES under `control:` in the YAML config file in place
   (--file, default $CONTOURD_CONFIG or /etc/contourd/contourd.yaml; --output writes elsewhere),
-  keeping comments, key order and layout; the previous file is kept as FILE.bak. Chosen over a
+  keeping comments, key order and layout; the previous file is kept as FILE.bak. Both are written
+  atomically (temporary file in the same directory, fsync, rename) with the config's owner, group
+  and mode kept (a root:contourd 0640 config stays so); refused when they cannot be kept. Chosen over a
   separate overrides file because the config loader has no include key: one file stays the
   single source of truth, and `contourd --check-config FILE` validates it. The edited text is
   validated and read back with contourd's own loader before anything is written. Mapping:
