@@ -593,6 +593,7 @@ json Daemon::cmd_record(const json& req) {
                          "' must be 1..128 characters of A-Z a-z 0-9 . _ - (not starting with '.'); "
                          "it goes into " + telemetry_dir_);
     }
+    if (!telemetry_error_.empty()) throw CommandError("record: " + telemetry_error_);
     const std::string path = (fs::path(telemetry_dir_) / name).string();
     try {
       writer_->start_recording(path);

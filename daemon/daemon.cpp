@@ -105,21 +105,22 @@ void Daemon::check_paths() {
   }
   const fs::path tel = normal_absolute(expand_env(cfg_.telemetry.directory));
   const std::string tel_key = file + ": telemetry.directory: ";
-  fs::create_directories(tel, ec);
-  if (ec || !fs::is_directory(tel)) {
-    throw StartupConfigError(tel_key + "cannot create " + tel.string() + " (" +
-                             (ec ? ec.message() : std::string("not a directory")) + ")");
-  }
-  if (::access(tel.c_str(), W_OK | X_OK) != 0) {
-    throw StartupConfigError(tel_key + tel.string() + " is not writable by uid " +
-                             std::to_string(::getuid()));
-  }
   if (in_private_tmp(tel.string(), mountinfo)) {
     throw StartupConfigError(tel_key + tel.string() +
                              " is inside this service's private /tmp (PrivateTmp=yes), where no "
                              "client can read the records; use /var/lib/contourd/records "
                              "(StateDirectory=contourd)");
   }
+  // Not fatal: the loop runs without recording (e.g. config/hil.yaml's default
+  // /var/lib/contourd/records for a developer who is not root); `record` then refuses, naming it.
+  fs::create_directories(tel, ec);
+  if (ec || !fs::is_directory(tel)) {
+    telemetry_error_ = tel_key + "cannot create " + tel.string() + " (" +
+                       (ec ? ec.message() : std::string("not a directory")) + ")";
+  } else if (::access(tel.c_str(), W_OK | X_OK) != 0) {
+    telemetry_error_ = tel_key + tel.string() + " is not writable by uid " + std::to_string(::getuid());
+  }
+  if (!telemetry_error_.empty()) spdlog::warn("{}: `record` will refuse", telemetry_error_);
   telemetry_dir_ = tel.string();
 }
 

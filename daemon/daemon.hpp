@@ -44,8 +44,8 @@ struct DaemonOptions {
   std::optional<std::string> socket_path;  // --socket overrides socket.path
 };
 
-// A start-up problem with a configured path (socket directory missing, telemetry directory not
-// creatable or inside a private /tmp): Daemon::run() logs it and returns 78 (EX_CONFIG), which the
+// A start-up problem with a configured path (socket directory missing, socket or telemetry
+// directory inside a private /tmp): Daemon::run() logs it and returns 78 (EX_CONFIG), which the
 // unit's RestartPreventExitStatus= does not restart.
 class StartupConfigError : public std::runtime_error {
  public:
@@ -133,6 +133,7 @@ class Daemon {
   // Telemetry files go only here (absolute; created by check_paths()): `record` refuses any other
   // directory, since a client's path may not be the daemon's (PrivateTmp=yes).
   std::string telemetry_dir_;
+  std::string telemetry_error_;  // why telemetry_dir_ is unusable ("" when it is usable)
   // The one chunked upload in progress (command thread only): bounded by
   // socket.max_program_bytes; a new upload from another connection replaces it only when idle.
   struct Upload {
