@@ -68,6 +68,7 @@ SocketConfig parse_socket(Section& s) {
   c.max_requests_per_s = static_cast<int>(s.integer("max_requests_per_s", 500, 1, 100000));
   c.max_buffered_bytes =
       static_cast<int>(s.integer("max_buffered_bytes", 4 << 20, 64 << 10, 1 << 30));
+  c.max_program_bytes = static_cast<long>(s.integer("max_program_bytes", 16L << 20, 1024, 1L << 30));
   return c;
 }
 

@@ -41,6 +41,8 @@ struct SocketConfig {
   double idle_timeout_s = 60.0;    // no complete request this long: dropped (subscribers exempt)
   int max_requests_per_s = 500;    // per client (1 s burst); estop/hold/stop are never refused
   int max_buffered_bytes = 4 << 20;  // per client: replies/events unread beyond this: dropped
+  // Largest part program `load {program}` / the chunked `upload` accepts (bytes of text).
+  long max_program_bytes = 16L << 20;
 };
 
 struct LogConfig {

@@ -1,4 +1,5 @@
 #include "daemon/command_server.hpp"
+#include "daemon/command_table.hpp"
 
 #include <fcntl.h>
 #include <grp.h>
@@ -129,9 +130,6 @@ std::string seconds_text(double s) {
 double seconds_between(std::chrono::steady_clock::time_point a,
                        std::chrono::steady_clock::time_point b) {
   return std::chrono::duration<double>(b - a).count();
-}
-bool is_safety_command(const std::string& cmd) {
-  return cmd == "estop" || cmd == "hold" || cmd == "stop";
 }
 }  // namespace
 

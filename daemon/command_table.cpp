@@ -63,6 +63,18 @@ std::vector<CommandSpec> build_table() {
        {path, program, name}, bits({S::kReady}), false, false,
        "READY, not jogging; exactly one of path / program",
        "{job, name, lines, motion_blocks, length_mm}"});
+  {
+    ArgSpec off = typed("offset", ArgType::kJobNumber, true, "a byte offset (0 starts an upload)",
+                        "bytes received so far: 0 starts, each chunk continues exactly");
+    add({CommandId::kUpload, "upload",
+         "a part program of any size by content, in chunks of one socket line each; the final "
+         "chunk loads it like `load` (limit socket.max_program_bytes)",
+         {typed("name", ArgType::kString, true, "a non-empty string", "the program's name"), off,
+          typed("data", ArgType::kString, true, "a string", "the next chunk of the program text"),
+          typed("final", ArgType::kBool, false, "true or false", "last chunk: load the program")},
+         bits({S::kReady}), false, false, "READY for the final chunk (one upload at a time)",
+         "{name, bytes, complete}; final: as `load` plus bytes"});
+  }
   add({CommandId::kRun, "run", "start the loaded program (or load path / program first)",
        {path, program, name}, bits({S::kReady}), false, false, "READY with a program loaded",
        "{job, state}"});
@@ -114,8 +126,11 @@ std::vector<CommandSpec> build_table() {
        kAnyState, false, false, "any", "{feed_override_percent}"});
   add({CommandId::kRecord, "record", "telemetry CSV recording",
        {typed("action", ArgType::kChoice, true, "\"start\" or \"stop\"", "start or stop", "start|stop"),
-        typed("path", ArgType::kString, false, "a string", "CSV file (default: telemetry.directory)")},
-       kAnyState, false, false, "any", "{recording, path}"});
+        typed("path", ArgType::kString, false, "a string",
+              "CSV file, inside telemetry.directory (the only place records are written)"),
+        typed("name", ArgType::kString, false, "a string",
+              "CSV file name in telemetry.directory (default contourd-CYCLE.csv)")},
+       kAnyState, false, false, "any", "{recording, path, directory}"});
   const ArgSpec topic = typed("topic", ArgType::kChoice, true, "\"telemetry\" or \"events\"",
                               "telemetry (samples) or events (log lines)", "telemetry|events");
   add({CommandId::kSubscribe, "subscribe", "stream telemetry samples or events on this connection",

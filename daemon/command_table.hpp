@@ -25,7 +25,7 @@
 namespace contour::daemon {
 
 enum class CommandId : std::uint8_t {
-  kStatus, kLoad, kRun, kResult, kHold, kResume, kStop, kEstop, kReset, kEnable, kDisable, kJog,
+  kStatus, kLoad, kUpload, kRun, kResult, kHold, kResume, kStop, kEstop, kReset, kEnable, kDisable, kJog,
   kSetPosition, kHome, kGains, kOverride, kRecord, kSubscribe, kUnsubscribe, kForce, kSimGpio,
   kShutdown,
 };

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -330,12 +331,6 @@ void Daemon::free_released_jobs() {
 }
 
 json Daemon::cmd_load(const json& req) {
-  const auto st = loop_->status();
-  if (st.state != MachineState::kReady) {
-    throw CommandError(std::string("load is not allowed in state ") + std::string(to_string(st.state)) +
-                       " (needs READY)");
-  }
-  if (st.jogging) throw CommandError("load is not allowed while jogging");
   ProgramText src;
   if (req.contains("path") == req.contains("program")) {
     throw CommandError("load needs exactly one of 'path' (file on the daemon's host) or 'program' (text)");
@@ -347,12 +342,27 @@ json Daemon::cmd_load(const json& req) {
   } else {
     if (!req["program"].is_string()) throw CommandError("argument 'program' must be a string");
     src.text = req["program"].get<std::string>();
+    if (src.text.size() > static_cast<std::size_t>(cfg_.socket.max_program_bytes)) {
+      throw CommandError("load: the program has " + std::to_string(src.text.size()) +
+                         " bytes, more than socket.max_program_bytes = " +
+                         std::to_string(cfg_.socket.max_program_bytes));
+    }
     src.name = "<inline>";
     if (req.contains("name")) {
       if (!req["name"].is_string()) throw CommandError("argument 'name' must be a string");
       src.name = req["name"].get<std::string>();
     }
   }
+  return load_source(src);
+}
+
+json Daemon::load_source(const ProgramText& src) {
+  const auto st = loop_->status();
+  if (st.state != MachineState::kReady) {
+    throw CommandError(std::string("load is not allowed in state ") + std::string(to_string(st.state)) +
+                       " (needs READY)");
+  }
+  if (st.jogging) throw CommandError("load is not allowed while jogging");
   const Eigen::Vector3d start(st.ref_mm[0], st.ref_mm[1], st.ref_mm[2]);
   ProgramSummary sum;
   try {
@@ -524,24 +534,52 @@ json Daemon::cmd_set_position(const json& req) {
   throw CommandError("set-position: the bus did not accept the new position");
 }
 
+// Telemetry files are written only into telemetry_dir_ (telemetry.directory, checked at start-up):
+// a client's path may not be the daemon's (PrivateTmp=yes gives the service its own /tmp), so a
+// path elsewhere is refused instead of "succeeding" where no client looks. The reply names the
+// absolute path of the file.
 json Daemon::cmd_record(const json& req) {
+  namespace fs = std::filesystem;
   const json& a = arg(req, "action");
   if (!a.is_string()) throw CommandError("argument 'action' must be \"start\" or \"stop\"");
   if (a == "start") {
-    std::string path;
+    if (req.contains("path") && req.contains("name")) {
+      throw CommandError("record start takes 'name' (a file name) or 'path', not both");
+    }
+    std::string name = "contourd-" + std::to_string(loop_->status().cycle) + ".csv";
     if (req.contains("path")) {
       if (!req["path"].is_string()) throw CommandError("argument 'path' must be a string");
-      path = req["path"].get<std::string>();
-    } else {
-      path = (std::filesystem::path(expand_env(cfg_.telemetry.directory)) /
-              ("contourd-" + std::to_string(loop_->status().cycle) + ".csv")).string();
+      const fs::path p = fs::path(req["path"].get<std::string>()).lexically_normal();
+      if (!p.is_absolute() || p.parent_path() != fs::path(telemetry_dir_)) {
+        throw CommandError("record: " + req["path"].get<std::string>() +
+                           " is outside the telemetry directory " + telemetry_dir_ +
+                           " (telemetry.directory), the only place the daemon writes records (a "
+                           "client's /tmp is not the service's); give a file name instead, the "
+                           "reply names the file");
+      }
+      name = p.filename().string();
+    } else if (req.contains("name")) {
+      if (!req["name"].is_string()) throw CommandError("argument 'name' must be a string");
+      name = req["name"].get<std::string>();
     }
+    const bool plain = !name.empty() && name.size() <= 128 && name[0] != '.' &&
+                       std::all_of(name.begin(), name.end(), [](char c) {
+                         return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '.' ||
+                                c == '_' || c == '-';
+                       });
+    if (!plain) {
+      throw CommandError("record: file name '" + name +
+                         "' must be 1..128 characters of A-Z a-z 0-9 . _ - (not starting with '.'); "
+                         "it goes into " + telemetry_dir_);
+    }
+    if (!telemetry_error_.empty()) throw CommandError("record: " + telemetry_error_);
+    const std::string path = (fs::path(telemetry_dir_) / name).string();
     try {
       writer_->start_recording(path);
     } catch (const std::exception& e) {
       throw CommandError(std::string("record: ") + e.what());
     }
-    return {{"recording", true}, {"path", path}};
+    return {{"recording", true}, {"path", path}, {"directory", telemetry_dir_}};
   }
   if (a == "stop") return {{"recording", false}, {"path", writer_->stop_recording()}};
   throw CommandError("argument 'action' must be \"start\" or \"stop\"");
@@ -584,6 +622,7 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
   switch (spec->id) {
     case CommandId::kStatus: return status_json();
     case CommandId::kLoad: return cmd_load(req);
+    case CommandId::kUpload: return cmd_upload(req, client);
     case CommandId::kRun: {
       if (req.contains("path") || req.contains("program")) cmd_load(req);
       const auto st = loop_->status();

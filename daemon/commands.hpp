@@ -2,7 +2,11 @@
 // Command socket protocol of contourd (handlers: Daemon::handle in daemon/commands.cpp).
 // Request {"id": any, "cmd": name, ...}; reply {"id", "ok", "result"|"error"} (command_server.hpp).
 //   status                                   state, positions, errors, timing statistics
-//   load   {path | program [, name]}         validate (file:line:column errors, soft limits), plan
+//   load   {path | program [, name]}         validate (file:line:column errors, soft limits), plan;
+//                                            program: at most socket.max_program_bytes
+//   upload {name, offset, data [, final]}    a program of any size in chunks (each request one
+//                                            socket line); offset 0 starts, final: true loads it
+//                                            (reply as load, + bytes). Total <= max_program_bytes
 //   run    [{path | program}]                start the loaded program (READY)
 //   result {job}                             run figures: state, duration_s, max/rms_contour_error_um,
 //                                            faults, overruns, ...
@@ -13,7 +17,9 @@
 //                                            checked, swapped at a cycle boundary in any state
 //                                            (controller state kept, bumpless integral)
 //   override {percent}                       feed override
-//   record {action: start|stop [, path]}     telemetry CSV
+//   record {action: start|stop [, name | path]}  telemetry CSV, only in telemetry.directory:
+//                                            name = file name there, path must be inside it;
+//                                            reply {recording, path (absolute), directory}
 //   subscribe | unsubscribe {topic: telemetry|events}
 //   force  [{enable: bool | action: on|off, reference_N}]   force control (needs `dynamometer:`);
 //                                            no argument: force status

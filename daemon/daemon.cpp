@@ -4,9 +4,14 @@
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
 
+#include <unistd.h>
+
 #include <chrono>
 #include <cstdlib>
 #include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <stdexcept>
 #include <thread>
 
@@ -37,6 +42,86 @@ std::string expand_env(const std::string& s) {
   }
   if (i < s.size()) out += s.substr(i);
   return out;
+}
+
+bool in_private_tmp(const std::string& path, const std::string& mountinfo) {
+  // Fields: id parent major:minor root mount-point ... (proc(5)). The deepest mount point holding
+  // `path` wins; of equal ones the later line (mounted on top).
+  std::istringstream in(mountinfo);
+  std::string line, best_mp, best_root;
+  bool found = false;
+  while (std::getline(in, line)) {
+    std::istringstream ls(line);
+    std::string id, parent, dev, root, mp;
+    if (!(ls >> id >> parent >> dev >> root >> mp)) continue;
+    const bool under = mp == "/" || path == mp ||
+                       (path.size() > mp.size() && path.compare(0, mp.size(), mp) == 0 &&
+                        path[mp.size()] == '/');
+    if (under && (!found || mp.size() >= best_mp.size())) {
+      found = true;
+      best_mp = mp;
+      best_root = root;
+    }
+  }
+  return found && best_root.find("/systemd-private-") != std::string::npos;
+}
+
+namespace {
+
+std::filesystem::path normal_absolute(const std::string& p) {
+  auto n = std::filesystem::absolute(p).lexically_normal();
+  if (!n.has_filename() && n.has_parent_path() && n != n.root_path()) n = n.parent_path();
+  return n;
+}
+
+}  // namespace
+
+// Before anything starts (no drive is enabled yet): every path a client relies on is checked here,
+// so a wrong one is a configuration error (exit 78, not restarted) instead of exit 1 and a restart
+// loop, or a command that "succeeds" into a directory no client can see.
+void Daemon::check_paths() {
+  namespace fs = std::filesystem;
+  std::string mountinfo;
+  {
+    std::ifstream in("/proc/self/mountinfo");
+    std::stringstream ss;
+    ss << in.rdbuf();
+    mountinfo = ss.str();
+  }
+  const std::string file = opt_.config_path;
+  const std::string sock_key = opt_.socket_path ? "--socket" : file + ": socket.path";
+  const fs::path sock = normal_absolute(expand_env(opt_.socket_path ? *opt_.socket_path : cfg_.socket.path));
+  std::error_code ec;
+  if (!fs::is_directory(sock.parent_path(), ec)) {
+    throw StartupConfigError(sock_key + ": the directory " + sock.parent_path().string() +
+                             " of the command socket " + sock.string() +
+                             " does not exist (create it; the systemd unit's RuntimeDirectory=contourd "
+                             "creates /run/contourd)");
+  }
+  if (in_private_tmp(sock.string(), mountinfo)) {
+    throw StartupConfigError(sock_key + ": " + sock.string() +
+                             " is inside this service's private /tmp (PrivateTmp=yes), where no "
+                             "client can reach it; use /run/contourd/contourd.sock");
+  }
+  const fs::path tel = normal_absolute(expand_env(cfg_.telemetry.directory));
+  const std::string tel_key = file + ": telemetry.directory: ";
+  if (in_private_tmp(tel.string(), mountinfo)) {
+    throw StartupConfigError(tel_key + tel.string() +
+                             " is inside this service's private /tmp (PrivateTmp=yes), where no "
+                             "client can read the records; use /var/lib/contourd/records "
+                             "(StateDirectory=contourd)");
+  }
+  // Not fatal: the loop runs without recording (e.g. config/hil.yaml's default
+  // /var/lib/contourd/records for a developer who is not root); `record` then refuses, naming it.
+  fs::create_directories(tel, ec);
+  if (ec || !fs::is_directory(tel)) {
+    telemetry_error_ = tel_key + "cannot create " + tel.string() + " (" +
+                       (ec ? ec.message() : std::string("not a directory")) + ")";
+  } else if (::access(tel.c_str(), W_OK | X_OK) != 0) {
+    telemetry_error_ = tel_key + tel.string() + " is not writable by uid " + std::to_string(::getuid());
+  }
+  if (!telemetry_error_.empty()) spdlog::warn("{}: `record` will refuse", telemetry_error_);
+  telemetry_dir_ = tel.string();
 }
 
 Daemon::Daemon(config::Config cfg, DaemonOptions opt) : cfg_(std::move(cfg)), opt_(std::move(opt)) {}
@@ -347,7 +432,12 @@ int Daemon::run() {
   sigaddset(&set, SIGPIPE);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);
   try {
+    check_paths();
     start_components();
+  } catch (const StartupConfigError& e) {
+    spdlog::critical("start-up failed: {}", e.what());
+    stop_components();
+    return 78;  // EX_CONFIG: RestartPreventExitStatus=78
   } catch (const std::exception& e) {
     spdlog::critical("start-up failed: {}", e.what());
     stop_components();

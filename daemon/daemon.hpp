@@ -16,11 +16,13 @@
 // systemd: READY=1 once the drives are enabled and the loop runs; WATCHDOG=1 only while the loop's
 // cycle counter advances.
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -43,6 +45,19 @@ struct DaemonOptions {
   std::string config_path;
   std::optional<std::string> socket_path;  // --socket overrides socket.path
 };
+
+// A start-up problem with a configured path (socket directory missing, socket or telemetry
+// directory inside a private /tmp): Daemon::run() logs it and returns 78 (EX_CONFIG), which the
+// unit's RestartPreventExitStatus= does not restart.
+class StartupConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// True when `path` lies under a mount point of `mountinfo` (the text of /proc/self/mountinfo) that
+// systemd's PrivateTmp= made: its root is a "systemd-private-*" directory. Such a /tmp or /var/tmp
+// is the service's own, invisible to clients.
+bool in_private_tmp(const std::string& path, const std::string& mountinfo);
 
 // "${VAR:-default}" / "${VAR}" expansion for paths in the config (socket.path, telemetry.directory).
 std::string expand_env(const std::string& s);
@@ -83,6 +98,9 @@ class Daemon {
   nlohmann::json result_json(std::uint64_t job);
   MachineState post_and_wait(const LoopCommand& c, MachineState from, double timeout_s);
   nlohmann::json cmd_load(const nlohmann::json& req);
+  nlohmann::json load_source(const ProgramText& src);  // cmd_load after its arguments
+  nlohmann::json cmd_upload(const nlohmann::json& req, const ClientInfo& client);  // commands_files.cpp
+  void check_paths();  // socket directory, telemetry directory: StartupConfigError
   nlohmann::json cmd_gains(const nlohmann::json& req);
   nlohmann::json cmd_jog(const nlohmann::json& req);
   nlohmann::json cmd_set_position(const nlohmann::json& req);
@@ -116,6 +134,21 @@ class Daemon {
   std::uint64_t next_job_ = 1;
   std::uint64_t loaded_job_ = 0;
   std::vector<std::string> recent_faults_;
+
+  // Telemetry files go only here (absolute; created by check_paths()): `record` refuses any other
+  // directory, since a client's path may not be the daemon's (PrivateTmp=yes).
+  std::string telemetry_dir_;
+  std::string telemetry_error_;  // why telemetry_dir_ is unusable ("" when it is usable)
+  // The one chunked upload in progress (command thread only): bounded by
+  // socket.max_program_bytes; a new upload from another connection replaces it only when idle.
+  struct Upload {
+    std::uint64_t client = 0;
+    pid_t pid = 0;
+    std::string name;
+    std::string text;
+    std::chrono::steady_clock::time_point last;
+  };
+  std::optional<Upload> upload_;
 };
 
 }  // namespace contour::daemon

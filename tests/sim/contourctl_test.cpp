@@ -267,8 +267,16 @@ TEST_F(ContourctlTest, WatchCountTwoNonTty) {
 }
 
 TEST_F(ContourctlTest, RecordAndPlotProducePngs) {
-  const std::string csv = (dir_ / "rec.csv").string();
-  ASSERT_EQ(ctl({"record", "start", csv}).rc, 0);
+  // The daemon writes into its telemetry directory (sim.yaml: /tmp) and names the file; a path
+  // elsewhere (this test's directory) is refused naming that directory (issue 17).
+  const Proc elsewhere = ctl({"record", "start", (dir_ / "rec.csv").string()});
+  EXPECT_EQ(elsewhere.rc, 1);
+  EXPECT_NE(elsewhere.err.find("telemetry directory /tmp"), std::string::npos) << elsewhere.err;
+  const std::string name = "contourctl_test_" + std::to_string(::getpid()) + ".csv";
+  const Proc started = ctl({"--json", "record", "start", name});
+  ASSERT_EQ(started.rc, 0) << started.err;
+  const std::string csv = json::parse(lines_of(started.out).back()).value("path", "");
+  EXPECT_EQ(csv, "/tmp/" + name);
   const Proc r = ctl({"run", kProgram, "--wait", "--quiet"});
   ASSERT_EQ(r.rc, 0) << r.err;
   const std::string png = (dir_ / "error.png").string();
@@ -279,6 +287,7 @@ TEST_F(ContourctlTest, RecordAndPlotProducePngs) {
   // and path plots of diamond.ngc are 40-60 KB. The force plot of a run without force columns
   // is the feed override alone (flat 100 %): only checked to be a PNG beyond the empty frame.
   EXPECT_TRUE(is_png(png, 20000, &why)) << why;
+  EXPECT_NE(s.out.find("recording stopped: " + csv), std::string::npos) << s.out;
   for (const char* kind : {"path", "path3d", "force"}) {
     const std::string k_png = (dir_ / (std::string(kind) + ".png")).string();
     const Proc p = ctl({"plot", csv, "--plot", k_png, "--kind", kind, "--program", kProgram});
@@ -295,6 +304,7 @@ TEST_F(ContourctlTest, RecordAndPlotProducePngs) {
   const Proc b = ctl({"plot", bad, "--plot", (dir_ / "bad.png").string()});
   EXPECT_EQ(b.rc, 1);
   EXPECT_NE(b.err.find(bad), std::string::npos) << b.err;
+  fs::remove(csv);
 }
 
 TEST_F(ContourctlTest, GainsSetGetRoundTripAndSaveReloads) {

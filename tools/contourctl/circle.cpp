@@ -78,10 +78,11 @@ struct DirectionRun {
   cc::FitResult fit;
   std::vector<double> angle_rad, dev_um;  // radial deviation of the actual path (polar plot)
   json result;
+  std::string csv;  // the recording, where the daemon says it wrote it
 };
 
 DirectionRun run_direction(Client& c, const CircleTestOptions& o, bool cw,
-                           const std::string& csv_path, const Eigen::Vector3d& start) {
+                           const std::string& csv_name, const Eigen::Vector3d& start) {
   DirectionRun d;
   d.name = cw ? "CW" : "CCW";
   d.circle.radius_mm = o.radius_mm;
@@ -96,7 +97,11 @@ DirectionRun run_direction(Client& c, const CircleTestOptions& o, bool cw,
        << "G21 G90 G17\n"
        << (cw ? "G2" : "G3") << " X" << num(start.x()) << " Y" << num(start.y()) << " I"
        << num(-o.radius_mm) << " J0 P" << o.turns << " F" << num(o.feed_mm_min) << "\nM2\n";
-  c.call({{"cmd", "record"}, {"action", "start"}, {"path", csv_path}});
+  // The daemon writes into its own telemetry directory and names the file (under systemd its /tmp
+  // is not ours): read the CSV from the path in the reply.
+  const std::string csv_path =
+      c.call({{"cmd", "record"}, {"action", "start"}, {"name", csv_name}}).at("path").get<std::string>();
+  d.csv = csv_path;
   json run;
   try {
     run = c.call({{"cmd", "run"}, {"program", prog.str()}, {"name", "circle-test " + d.name}});
@@ -260,11 +265,7 @@ json run_circle_test(Client& c, const CircleTestOptions& o) {
   }
   const Eigen::Vector3d start(st["ref_mm"][0].get<double>(), st["ref_mm"][1].get<double>(),
                               st.at("ref_mm").size() > 2 ? st["ref_mm"][2].get<double>() : 0.0);
-  fs::path dir = o.record_dir.empty() ? fs::temp_directory_path() : fs::path(o.record_dir);
-  dir = fs::absolute(dir) / ("contourctl-circle-" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  // The daemon (maybe another user) writes the CSV into this directory.
-  fs::permissions(dir, fs::perms::all, fs::perm_options::replace);
+  const std::string tag = "contourctl-circle-" + std::to_string(::getpid()) + "-";
 
   GainsGuard guard(c, saved);
   json zero_ff = json::array();
@@ -277,7 +278,7 @@ json run_circle_test(Client& c, const CircleTestOptions& o) {
   if (o.cw) dirs.push_back(true);
   if (o.ccw) dirs.push_back(false);
   for (bool cw : dirs) {
-    const std::string csv = (dir / (std::string(cw ? "cw" : "ccw") + ".csv")).string();
+    const std::string csv = tag + (cw ? "cw" : "ccw") + ".csv";
     if (o.verbose)
       std::cerr << "circle-test: running " << (cw ? "CW" : "CCW") << ", " << o.turns
                 << " turns...\n";
@@ -286,8 +287,7 @@ json run_circle_test(Client& c, const CircleTestOptions& o) {
   // Sample period from the recording (t_s column).
   double t_period = period_s;
   {
-    const TelemetryCsv csv =
-        read_telemetry_csv((dir / (dirs.front() ? "cw.csv" : "ccw.csv")).string());
+    const TelemetryCsv csv = read_telemetry_csv(runs.front().csv);
     const auto& t = csv.at("t_s");
     if (csv.rows > 10) t_period = (t[csv.rows - 1] - t[0]) / static_cast<double>(csv.rows - 1);
   }
@@ -352,14 +352,15 @@ json run_circle_test(Client& c, const CircleTestOptions& o) {
     guard.restore();
     report["applied"] = false;
   }
+  std::vector<DirectionRun> after_runs;
   if (!o.plot_png.empty()) {
-    std::vector<DirectionRun> after;
+    std::vector<DirectionRun>& after = after_runs;
     if (o.apply) {
       // Re-run with the matched gains (uncoupled, as before) to show the effect.
       GainsGuard g2(c, c.call({{"cmd", "gains"}}));
       c.call({{"cmd", "gains"}, {"set", {{"coupling", false}, {"ff", zero_ff}}}});
       for (bool cw : dirs) {
-        const std::string csv = (dir / (std::string(cw ? "cw" : "ccw") + "_after.csv")).string();
+        const std::string csv = tag + (cw ? "cw" : "ccw") + "_after.csv";
         if (o.verbose)
           std::cerr << "circle-test: re-running " << (cw ? "CW" : "CCW")
                     << " with the matched gains...\n";
@@ -369,11 +370,19 @@ json run_circle_test(Client& c, const CircleTestOptions& o) {
     polar_plot(o.plot_png, runs, after, o);
     report["plot"] = o.plot_png;
   }
+  json csvs = json::array();
+  for (const auto* set : {&runs, &after_runs}) {
+    for (const auto& r : *set) csvs.push_back(r.csv);
+  }
   if (o.keep_csv) {
-    report["csv_dir"] = dir.string();
+    report["csv"] = csvs;
   } else {
-    std::error_code ec;
-    fs::remove_all(dir, ec);
+    // Best effort: the telemetry directory is the daemon's (group-writable under the unit's
+    // UMask=0007 for members of its group).
+    for (const auto& f : csvs) {
+      std::error_code ec;
+      fs::remove(f.get<std::string>(), ec);
+    }
   }
   return report;
 }
@@ -419,7 +428,9 @@ std::string format_circle_report(const json& r) {
                 r["applied"].get<bool>() ? "(applied)" : "(not applied; --apply sets them)");
   o << b;
   if (r.contains("plot")) o << "plot: " << r["plot"].get<std::string>() << '\n';
-  if (r.contains("csv_dir")) o << "CSV: " << r["csv_dir"].get<std::string>() << '\n';
+  if (r.contains("csv")) {
+    for (const auto& f : r["csv"]) o << "CSV: " << f.get<std::string>() << '\n';
+  }
   return o.str();
 }
 

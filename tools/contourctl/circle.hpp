@@ -32,8 +32,7 @@ struct CircleTestOptions {
   // daemon today, hence options.
   bool delay_compensation = true;
   double period_s = 0.0;   // servo period; 0: from the CSV's t_s column
-  std::string record_dir;  // where the daemon writes the CSV (must be readable here)
-  bool keep_csv = false;
+  bool keep_csv = false;  // keep the CSVs (in the daemon's telemetry directory; report "csv")
   bool apply = false;
   std::string plot_png;  // polar plot of the radial deviation ("" = none)
   bool verbose = true;   // progress lines on stderr

@@ -1,6 +1,13 @@
 #include "tools/contourctl/gains.hpp"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cctype>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -444,6 +451,74 @@ std::string config_with_gains(const std::string& text, const std::string& name, 
     throw std::runtime_error(
         "gains save: internal error: the edited config reads back different gains");
   return out;
+}
+
+void write_file_like(const std::string& path, const std::string& text, const std::string& like) {
+  auto fail = [&](const std::string& what) {
+    return std::runtime_error(path + ": " + what + " (" + std::strerror(errno) + "); nothing changed");
+  };
+  struct stat st {};
+  if (::stat(like.c_str(), &st) != 0) {
+    throw std::runtime_error(like + ": cannot stat (" + std::string(std::strerror(errno)) + ")");
+  }
+  const std::filesystem::path p(path);
+  std::string tmpl =
+      (p.parent_path().empty() ? std::filesystem::path(".") : p.parent_path()).string() + "/." +
+      p.filename().string() + ".XXXXXX";
+  const int fd = ::mkstemp(tmpl.data());
+  if (fd < 0) throw fail("cannot create a temporary file in its directory");
+  bool ok = false;
+  std::string why;
+  do {
+    // Owner and group first (fchown may clear set-id bits), then the mode.
+    if ((st.st_uid != ::geteuid() || st.st_gid != ::getegid()) &&
+        ::fchown(fd, st.st_uid, st.st_gid) != 0) {
+      why = "cannot keep owner:group " + std::to_string(st.st_uid) + ":" + std::to_string(st.st_gid) +
+            " of " + like;
+      break;
+    }
+    if (::fchmod(fd, st.st_mode & 07777) != 0) {
+      why = "cannot keep the mode of " + like;
+      break;
+    }
+    std::size_t off = 0;
+    while (off < text.size()) {
+      const ssize_t n = ::write(fd, text.data() + off, text.size() - off);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) break;
+      off += static_cast<std::size_t>(n);
+    }
+    if (off != text.size()) {
+      why = "cannot write";
+      break;
+    }
+    if (::fsync(fd) != 0) {
+      why = "cannot fsync";
+      break;
+    }
+    ok = true;
+  } while (false);
+  const int saved_errno = errno;
+  if (::close(fd) != 0 && ok) {
+    ok = false;
+    why = "cannot close";
+  }
+  if (ok && ::rename(tmpl.c_str(), path.c_str()) != 0) {
+    ok = false;
+    why = "cannot rename the temporary file over it";
+  }
+  if (!ok) {
+    const int e = errno != 0 ? errno : saved_errno;
+    ::unlink(tmpl.c_str());
+    errno = e;
+    throw fail(why);
+  }
+  // The rename itself survives a power loss only once the directory is on disk.
+  const int dfd = ::open(tmpl.substr(0, tmpl.rfind('/')).c_str(), O_RDONLY | O_DIRECTORY);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
 }
 
 }  // namespace contour::ctl

@@ -34,4 +34,11 @@ std::string config_with_gains(const std::string& config_text, const std::string&
 // Human-readable table of a `gains get` reply.
 std::string format_gains(const nlohmann::json& gains);
 
+// Replaces `path` by `text` atomically, keeping the owner, group and mode of `like` (the file being
+// replaced, or the config it was made from): a temporary file in the same directory gets them
+// (fchown/fchmod), is written and fsync'ed, renamed over `path`, and the directory fsync'ed. A
+// config like -rw-r----- root:daemon stays so (never world-readable). Throws std::runtime_error
+// naming the file; on any error `path` is unchanged and the temporary file removed.
+void write_file_like(const std::string& path, const std::string& text, const std::string& like);
+
 }  // namespace contour::ctl

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "control/gcode.hpp"
+#include "daemon/command_table.hpp"
 #include "tools/contourctl/circle.hpp"
 #include "tools/contourctl/client.hpp"
 #include "tools/contourctl/gains.hpp"
@@ -58,14 +59,62 @@ std::string slurp(const std::string& file) {
   return ss.str();
 }
 
-// Inline text when small (the daemon may not see the client's files, e.g. PrivateTmp), else the
-// absolute path.
-json program_args(const std::string& file) {
-  std::error_code ec;
-  const auto size = fs::file_size(file, ec);
-  if (ec) throw ErrorReply(file + ": cannot read (" + ec.message() + ")");
-  if (size < 32 * 1024) return {{"program", slurp(file)}, {"name", file}};
-  return {{"path", fs::absolute(file).string()}};
+// Programs always go by content, never by path: the daemon may not see the client's files
+// (systemd's PrivateTmp= and ProtectHome= give it its own /tmp and no /home). One `load {program}`
+// line when it fits a socket line (socket.max_line_bytes, 64 KiB by default, with room for the
+// request's other keys), else `upload` chunks of at most that size each; the daemon's
+// socket.max_program_bytes bounds the total.
+constexpr std::size_t kMaxRequestBytes = 60 * 1024;
+constexpr std::size_t kChunkBytes = 32 * 1024;
+
+std::string dump_utf8(const json& j, const std::string& file) {
+  try {
+    return j.dump();
+  } catch (const json::type_error&) {
+    throw ErrorReply(file + ": not UTF-8 text; part programs are sent as text");
+  }
+}
+
+// {program, name} for a load/run request when the text fits one line; empty otherwise.
+json inline_program_args(const std::string& file, const std::string& text) {
+  json a{{"program", text}, {"name", file}};
+  if (dump_utf8(a, file).size() <= kMaxRequestBytes) return a;
+  return json();
+}
+
+// Uploads and loads (the final chunk loads): the load reply (+ bytes).
+json upload_program(Client& c, const std::string& file, const std::string& text) {
+  std::size_t off = 0;
+  for (;;) {
+    std::size_t n = std::min(kChunkBytes, text.size() - off);
+    json req;
+    for (;;) {
+      // Never split a UTF-8 sequence: each chunk must be a valid JSON string on its own.
+      while (n > 1 && off + n < text.size() &&
+             (static_cast<unsigned char>(text[off + n]) & 0xC0) == 0x80) {
+        --n;
+      }
+      req = {{"cmd", "upload"}, {"name", file}, {"offset", off}, {"data", text.substr(off, n)},
+             {"final", off + n == text.size()}};
+      // Escaping grows control characters up to 6x: halve until the line fits.
+      if (n <= 64 || dump_utf8(req, file).size() <= kMaxRequestBytes) break;
+      n /= 2;
+    }
+    const json r = c.call(req);
+    off += n;
+    if (off == text.size()) return r;
+  }
+}
+
+json load_program(Client& c, const std::string& file) {
+  const std::string text = slurp(file);
+  const json a = inline_program_args(file, text);
+  if (!a.is_null()) {
+    json req{{"cmd", "load"}};
+    req.update(a);
+    return c.call(req);
+  }
+  return upload_program(c, file, text);
 }
 
 // Source lines of the program's motion blocks, for "block n/N" (the daemon's status reports the
@@ -199,14 +248,17 @@ int cmd_run(Client& c, const RunOptions& o, bool as_json) {
     if (o.wait) {
       // Load first (same as run with a program: the daemon's run loads it the same way): the load
       // reply carries the program length and motion-block count the progress display needs.
-      json l{{"cmd", "load"}};
-      l.update(program_args(o.program));
-      const json lr = c.call(l);
+      const json lr = load_program(c, o.program);
       total_mm = lr.value("length_mm", 0.0);
       n_blocks = lr.value("motion_blocks", std::size_t{0});
       lines = motion_lines(o.program);
     } else {
-      req.update(program_args(o.program));
+      const json a = inline_program_args(o.program, slurp(o.program));
+      if (a.is_null()) {
+        load_program(c, o.program);  // then `run` runs the loaded program
+      } else {
+        req.update(a);
+      }
     }
   }
   // Install before the run starts: a Ctrl-C from here on holds instead of killing us mid-reply.
@@ -378,7 +430,9 @@ Gains keys (gains set): axis.<x|y|z|index>.<kp|ki_per_s|kd_s|ff>=V, coupling.<cp
 
 gains save: rewrites the gain VALUES under `control:` in the YAML config file in place
   (--file, default $CONTOURD_CONFIG or /etc/contourd/contourd.yaml; --output writes elsewhere),
-  keeping comments, key order and layout; the previous file is kept as FILE.bak. Chosen over a
+  keeping comments, key order and layout; the previous file is kept as FILE.bak. Both are written
+  atomically (temporary file in the same directory, fsync, rename) with the config's owner, group
+  and mode kept (a root:contourd 0640 config stays so); refused when they cannot be kept. Chosen over a
   separate overrides file because the config loader has no include key: one file stays the
   single source of truth, and `contourd --check-config FILE` validates it. The edited text is
   validated and read back with contourd's own loader before anything is written. Mapping:
@@ -397,7 +451,15 @@ Plots (gnuplot, PNG; plot CSV... --plot F.png --kind K, or record stop --plot F.
 
 int main(int argc, char** argv) {
   CLI::App app{"contourctl: client of the contourd command socket"};
-  app.footer(kFooter);
+  // The daemon's command table (daemon/command_table.hpp) names and describes the socket
+  // commands: the same summaries as daemon/PROTOCOL.md.
+  app.footer(std::string("\nSocket commands (contourd's command table, daemon/PROTOCOL.md; contourctl\n"
+                         "subcommands of the same name send them):\n") +
+             contour::daemon::command_summary_text() + kFooter);
+  auto summary = [](const char* name, const char* fallback) {
+    const contour::daemon::CommandSpec* c = contour::daemon::find_command(name);
+    return c != nullptr ? std::string(c->summary) : std::string(fallback);
+  };
   std::string socket_path;
   bool as_json = false;
   // Global options go before or after the subcommand (`contourctl --json status` ==
@@ -420,8 +482,8 @@ int main(int argc, char** argv) {
   CircleTestOptions co;
   bool both = false, ccw_flag = false, cw_flag = false;
 
-  app.add_subcommand("status", "machine state, positions, errors, loop timing");
-  auto* load = app.add_subcommand("load", "validate and plan a part program");
+  app.add_subcommand("status", summary("status", "machine state"));
+  auto* load = app.add_subcommand("load", summary("load", "validate and plan a part program"));
   load->add_option("PROGRAM", program, "RS274/NGC file")->required();
   auto* run = app.add_subcommand("run", "run the loaded program (or load PROGRAM first)");
   run->add_option("PROGRAM", ro.program, "RS274/NGC file");
@@ -433,9 +495,9 @@ int main(int argc, char** argv) {
                   "seconds between progress lines when not a TTY");
   for (const char* c :
        {"hold", "resume", "stop", "estop", "reset", "enable", "disable", "shutdown"}) {
-    app.add_subcommand(c, std::string(c));
+    app.add_subcommand(c, summary(c, c));
   }
-  auto* jog = app.add_subcommand("jog", "jog an axis by a distance");
+  auto* jog = app.add_subcommand("jog", summary("jog", "jog an axis by a distance"));
   jog->add_option("AXIS", axis)->required();
   jog->add_option("VELOCITY_MM_MIN", vel)->required();
   jog->add_option("DISTANCE_MM", dist)->required();
@@ -448,10 +510,12 @@ int main(int argc, char** argv) {
   gains->add_option("ARGS", gains_args)->required();
   gains->add_option("--file", gains_file, "gains save: config file to update");
   gains->add_option("--output", gains_output, "gains save: write the edited config here instead");
-  auto* ovr = app.add_subcommand("override", "feed override in percent");
+  auto* ovr = app.add_subcommand("override", summary("override", "feed override in percent"));
   ovr->add_option("PERCENT", pct)->required();
   auto* rec =
-      app.add_subcommand("record", "record start [PATH] | record stop [--plot F.png --kind K]");
+      app.add_subcommand("record",
+                         "record start [NAME] | record stop [--plot F.png --kind K]: the daemon "
+                         "writes NAME into its telemetry directory and replies with the path");
   rec->add_option("ARGS", record_args)->required();
   rec->add_option("--plot", plot_png, "record stop: plot the recorded CSV to this PNG");
   rec->add_option("--kind", plot_kind, "error | path | path3d | force | timing");
@@ -486,9 +550,8 @@ int main(int argc, char** argv) {
   circle->add_flag("--apply", co.apply, "set the proposed matched gains (gains set)");
   circle->add_option("--plot", co.plot_png,
                      "polar plot of the radial deviation (with --apply: before/after)");
-  circle->add_option("--record-dir", co.record_dir,
-                     "directory both the daemon and you can write/read (default $TMPDIR or /tmp)");
-  circle->add_flag("--keep-csv", co.keep_csv, "keep the recorded CSVs");
+  circle->add_flag("--keep-csv", co.keep_csv,
+                   "keep the recorded CSVs (in the daemon's telemetry directory; paths in the report)");
   circle->add_option("--delay-cycles", co.delay_cycles,
                      "bus transport delay in cycles (default 1, as config/sim.yaml)");
   bool no_comp = false;
@@ -543,19 +606,13 @@ int main(int argc, char** argv) {
       const json g = c.call({{"cmd", "gains"}});
       const std::string edited = config_with_gains(slurp(file), file, g);
       const std::string out = gains_output.empty() ? file : gains_output;
-      if (gains_output.empty()) {
-        std::error_code ec;
-        fs::copy_file(file, file + ".bak", fs::copy_options::overwrite_existing, ec);
-        if (ec)
-          throw ErrorReply(file + ".bak: cannot write the backup (" + ec.message() +
-                           "); nothing changed");
-      }
-      {
-        const std::string tmp = out + ".tmp";
-        std::ofstream o(tmp);
-        if (!o || !(o << edited) || !(o.flush())) throw ErrorReply(tmp + ": cannot write");
-        o.close();
-        fs::rename(tmp, out);
+      // Atomic, and owner, group and mode kept (the backup's too): a config readable only by the
+      // daemon's group stays so.
+      try {
+        if (gains_output.empty()) write_file_like(file + ".bak", slurp(file), file);
+        write_file_like(out, edited, fs::exists(out) ? out : file);
+      } catch (const std::runtime_error& e) {
+        throw ErrorReply(e.what());
       }
       if (as_json)
         std::cout << json{{"saved", out}, {"gains", g}}.dump() << std::endl;
@@ -580,7 +637,8 @@ int main(int argc, char** argv) {
       return kExitOk;
     }
     if (cmd == "load") {
-      req.update(program_args(program));
+      print(load_program(c, program), as_json);
+      return kExitOk;
     } else if (cmd == "jog") {
       req["axis"] = axis;
       req["velocity_mm_min"] = vel;
@@ -614,11 +672,19 @@ int main(int argc, char** argv) {
       }
     } else if (cmd == "record") {
       if (record_args[0] != "start" && record_args[0] != "stop") {
-        std::cerr << "contourctl: record start [PATH] | record stop [--plot F.png]\n";
+        std::cerr << "contourctl: record start [NAME] | record stop [--plot F.png]\n";
         return kExitUsage;
       }
       req["action"] = record_args[0];
-      if (record_args.size() > 1) req["path"] = fs::absolute(record_args[1]).string();
+      // A bare NAME is a file in the daemon's telemetry directory; a PATH must be inside it (the
+      // daemon refuses any other, naming the directory). The reply names the file either way.
+      if (record_args.size() > 1) {
+        const std::string& a = record_args[1];
+        if (a.find('/') == std::string::npos)
+          req["name"] = a;
+        else
+          req["path"] = fs::absolute(a).string();
+      }
       const json r = c.call(req);
       if (record_args[0] == "stop" && !plot_png.empty()) {
         const PlotKind kind = parse_plot_kind(plot_kind);
