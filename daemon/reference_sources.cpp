@@ -108,8 +108,9 @@ RefPoint ProgramSource::step(const Inputs& in, ProgramStep& out) noexcept {
       spindle_waiting_ = true;
       // Judged on the target of the marker (the ramp and the feedback of the previous cycle must
       // both be there): at-speed of an older target does not count.
-      const double target = drivers::clamp_spindle_rpm(programmed_spindle_rpm(), spindle_limits_);
-      if (in.spindle_at_speed && target == in.spindle_target_rpm) {
+      spindle_wait_target_rpm_ =
+          drivers::clamp_spindle_rpm(programmed_spindle_rpm(), spindle_limits_);
+      if (in.spindle_at_speed && spindle_wait_target_rpm_ == in.spindle_target_rpm) {
         spindle_waiting_ = false;
         ++spindle_waits_;
         spindle_last_wait_s_ = static_cast<double>(spindle_wait_cycles_) * period_s_;

@@ -86,6 +86,8 @@ class ProgramSource {
   [[nodiscard]] double programmed_spindle_rpm() const noexcept;
   [[nodiscard]] bool spindle_waiting() const noexcept { return spindle_waiting_; }
   [[nodiscard]] std::int64_t waited_cycles() const noexcept { return spindle_wait_cycles_; }
+  // The clamped speed the current (or last) wait is for.
+  [[nodiscard]] double wait_target_rpm() const noexcept { return spindle_wait_target_rpm_; }
   [[nodiscard]] std::uint64_t spindle_waits() const noexcept { return spindle_waits_; }
   [[nodiscard]] double last_wait_s() const noexcept { return spindle_last_wait_s_; }
   [[nodiscard]] std::uint64_t underruns() const noexcept { return underruns_; }
@@ -107,6 +109,7 @@ class ProgramSource {
   std::uint64_t underruns_ = 0;
   bool spindle_waiting_ = false;
   std::int64_t spindle_wait_cycles_ = 0;
+  double spindle_wait_target_rpm_ = 0.0;
   std::uint64_t spindle_waits_ = 0;
   double spindle_last_wait_s_ = 0.0;
 };

@@ -382,11 +382,12 @@ void ServoLoop::cycle() noexcept {
   const bool servo = st == MachineState::kReady || st == MachineState::kRunning ||
                      st == MachineState::kHold;
   const RefPoint r = reference(st, servo);
+  const Eigen::Vector3d v_ref = (ref_ - ref_prev_) / period_s_;  // control and following error
   double eps_norm = 0.0;
-  AxisCommands out = control_step(r, st, servo, eps_norm);
+  AxisCommands out = control_step(r, st, servo, v_ref, eps_norm);
   channels(st, out);
   write(out);
-  supervise(st, servo, eps_norm);
+  supervise(st, servo, v_ref, eps_norm);
   publish_cycle();
   ++cycle_;
 }
@@ -507,10 +508,8 @@ void ServoLoop::program_step(MachineState st, RefPoint& r) noexcept {
          fb_.bus.spindle.actual_rpm);
   }
   if (s.spindle_waiting) {
-    const double target =
-        drivers::clamp_spindle_rpm(program_.programmed_spindle_rpm(), spindle_.limits());
-    if (const FaultReport f = supervisor_.check_spindle_wait(program_.waited_cycles(),
-                                                             fb_.bus.spindle.actual_rpm, target)) {
+    if (const FaultReport f = supervisor_.check_spindle_wait(
+            program_.waited_cycles(), fb_.bus.spindle.actual_rpm, program_.wait_target_rpm())) {
       program_.cancel_spindle_wait();
       raise_fault(f);
     }
@@ -522,10 +521,9 @@ void ServoLoop::program_step(MachineState st, RefPoint& r) noexcept {
 }
 
 AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool servo,
-                                     double& eps_norm) noexcept {
+                                     const Eigen::Vector3d& v_ref, double& eps_norm) noexcept {
   AxisCommands out;
   out.mode = DriveMode::kDisabled;
-  const Eigen::Vector3d v_ref = (ref_ - ref_prev_) / period_s_;
   if (servo) {
     const control::Vec3 p_hat = ctrl_.predict(fb_.act_mm);
     model_.push_reference(ref_);
@@ -613,12 +611,12 @@ void ServoLoop::write(const AxisCommands& out) noexcept {
   bus_.write(out);
 }
 
-void ServoLoop::supervise(MachineState st, bool servo, double eps_norm) noexcept {
+void ServoLoop::supervise(MachineState st, bool servo, const Eigen::Vector3d& v_ref,
+                          double eps_norm) noexcept {
   if (st != MachineState::kDisabled && st != MachineState::kFault && st != MachineState::kEstop) {
     if (const FaultReport f = supervisor_.check_bus(fb_, servo)) raise_fault(f);
   }
   if (servo && sm_.state() != MachineState::kFault) {
-    const Eigen::Vector3d v_ref = (ref_ - ref_prev_) / period_s_;
     if (const FaultReport f = supervisor_.check_motion(ref_, fb_.act_mm, v_ref, eps_norm, limits_)) {
       raise_fault(f);
     }

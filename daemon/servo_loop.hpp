@@ -238,10 +238,11 @@ class ServoLoop {
   void logic() noexcept {}  // the machine-logic scan lands here (soft PLC)
   MachineState advance_state() noexcept;
   RefPoint reference(MachineState st, bool servo) noexcept;
-  AxisCommands control_step(const RefPoint& r, MachineState st, bool servo, double& eps_norm) noexcept;
+  AxisCommands control_step(const RefPoint& r, MachineState st, bool servo,
+                            const Eigen::Vector3d& v_ref, double& eps_norm) noexcept;
   void channels(MachineState st, AxisCommands& out) noexcept;
   void write(const AxisCommands& out) noexcept;
-  void supervise(MachineState st, bool servo, double eps_norm) noexcept;
+  void supervise(MachineState st, bool servo, const Eigen::Vector3d& v_ref, double eps_norm) noexcept;
   void publish_cycle() noexcept;
 
   [[nodiscard]] SourceKind select_source(MachineState st) const noexcept;
