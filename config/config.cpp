@@ -78,6 +78,22 @@ Config parse_root(const YAML::Node& root, const std::string& name) {
       Section sec = top.child("gpio");
       cfg.gpio = parse_gpio(sec);
     }
+    {
+      Section sec = top.child("plc");
+      cfg.plc = parse_plc(sec);
+    }
+    {
+      Section sec = top.child("mqtt");
+      cfg.mqtt = parse_mqtt(sec);
+    }
+    {
+      Section sec = top.child("mtconnect");
+      cfg.mtconnect = parse_mtconnect(sec);
+    }
+    {
+      Section sec = top.child("web");
+      cfg.web = parse_web(sec);
+    }
   }
   diag.throw_if_any();
   return cfg;

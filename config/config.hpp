@@ -11,8 +11,11 @@
 #include "config/gpio_config.hpp"
 #include "config/interpolator_config.hpp"
 #include "config/machine_config.hpp"
+#include "config/plc_config.hpp"
 #include "config/program_config.hpp"
+#include "config/shopnet_config.hpp"
 #include "config/spindle_config.hpp"
+#include "config/web_config.hpp"
 #include "config/yaml_reader.hpp"
 
 namespace contour::config {
@@ -41,6 +44,10 @@ struct Config {
   DynamometerConfig dynamometer;
   SpindleConfig spindle;
   GpioConfig gpio;
+  PlcConfig plc;              // soft PLC (issue 20)
+  MqttConfig mqtt;            // contour-bridge (issue 22); validated, not used by contourd
+  MtconnectConfig mtconnect;  // contour-bridge (issue 22); validated, not used by contourd
+  WebConfig web;              // contour-web (issue 21); validated, not used by contourd
 };
 
 // Throws ConfigError with every problem found.

@@ -191,10 +191,7 @@ void CommandServer::run() {
       keep = process_input(c);
       lk.lock();
       if (keep && (p.revents & POLLOUT)) keep = flush_client(c);
-      if (!keep && !c.overflow) {
-        ::close(c.fd);
-        clients_.erase(it);
-      }
+      if (!keep && !c.overflow) close_client(it);
     }
     drop_idle_clients(Clock::now());
     if (fds[0].revents & POLLIN) accept_clients();
@@ -212,8 +209,7 @@ void CommandServer::run() {
                "socket: dropped " + describe(it->second.info) + ": more than " +
                    std::to_string(opt_.max_backlog_bytes) +
                    " bytes of replies/events unread (socket.max_buffered_bytes)");
-        ::close(it->second.fd);
-        it = clients_.erase(it);
+        it = close_client(it);
       }
     }
     emit_notices();
@@ -269,8 +265,7 @@ void CommandServer::drop_idle_clients(Clock::time_point now) {
                       : " (" + std::to_string(c.in.size()) + " bytes of an unfinished line)") +
                  " (socket.idle_timeout_s " + seconds_text(opt_.idle_timeout_s) + ")");
     }
-    ::close(c.fd);
-    clients_.erase(it);
+    close_client(it);
   }
 }
 
@@ -369,8 +364,7 @@ bool CommandServer::evict_longest_idle(const ClientInfo& for_whom) {
              seconds_text(seconds_between(v.last_request, Clock::now())) + " ago" + unfinished +
              (v.topics.empty() ? std::string() : " (subscriber)") + ", to admit " +
              describe(for_whom));
-  ::close(v.fd);
-  clients_.erase(victim);
+  close_client(victim);
   return true;
 }
 
@@ -389,10 +383,7 @@ void CommandServer::reap_hung_up_clients() {
     lk.unlock();
     const bool keep = serve_pending(it->second);  // answers what it sent, then sees the EOF
     lk.lock();
-    if (!keep && !it->second.overflow) {
-      ::close(it->second.fd);
-      clients_.erase(it);
-    }
+    if (!keep && !it->second.overflow) close_client(it);
   }
 }
 
@@ -546,7 +537,22 @@ void CommandServer::notice(ServerNotice::Kind k, const ClientInfo& who, std::str
   pending_notices_.push_back({k, who, std::move(text)});
 }
 
+std::map<std::uint64_t, CommandServer::Client>::iterator CommandServer::close_client(
+    std::map<std::uint64_t, Client>::iterator it) {
+  ::close(it->second.fd);
+  pending_disconnects_.push_back(it->second.info);
+  return clients_.erase(it);
+}
+
 void CommandServer::emit_notices() {
+  std::vector<ClientInfo> gone;
+  {
+    std::lock_guard lk(mu_);
+    gone.swap(pending_disconnects_);
+  }
+  if (on_disconnect_) {
+    for (const auto& c : gone) on_disconnect_(c);
+  }
   if (pending_notices_.empty()) return;
   std::vector<ServerNotice> v;
   v.swap(pending_notices_);

@@ -116,6 +116,11 @@ class CommandServer {
   void subscribe(std::uint64_t client, const std::string& topic);
   void unsubscribe(std::uint64_t client, const std::string& topic);
   void publish(const std::string& topic, const nlohmann::json& event);
+  // Called on the server thread, with no lock held, once for every client that is gone (hung up,
+  // dropped, evicted), after the round in which it went: a dead-man (continuous jog) or a
+  // per-client resource ends with its client. Set before start().
+  using DisconnectHandler = std::function<void(const ClientInfo&)>;
+  void on_disconnect(DisconnectHandler h) { on_disconnect_ = std::move(h); }
 
   [[nodiscard]] CommandServerStats stats() const;
   [[nodiscard]] const std::string& path() const { return opt_.path; }
@@ -154,7 +159,9 @@ class CommandServer {
   void handle_line(Client& c, const std::string& line);
   void queue(Client& c, const nlohmann::json& j);
   void notice(ServerNotice::Kind k, const ClientInfo& who, std::string text);
-  void emit_notices();
+  void emit_notices();  // also the disconnect callbacks
+  // Closes the client's descriptor, erases it (caller holds mu_) and queues its disconnect.
+  std::map<std::uint64_t, Client>::iterator close_client(std::map<std::uint64_t, Client>::iterator it);
   [[nodiscard]] static std::string describe(const ClientInfo& c);
 
   CommandServerOptions opt_;
@@ -168,6 +175,8 @@ class CommandServer {
   std::map<std::uint64_t, Client> clients_;
   std::uint64_t next_id_ = 1;
   CommandServerStats stats_;
+  DisconnectHandler on_disconnect_;
+  std::vector<ClientInfo> pending_disconnects_;  // guarded by mu_
   std::vector<ServerNotice> pending_notices_;  // server thread only; emitted without mu_
   double notice_tokens_ = 0.0;
   Clock::time_point notice_refill_at_{};

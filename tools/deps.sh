@@ -18,6 +18,24 @@ PACKAGES=(
   gnuplot-nox rt-tests mbpoll systemd time
 )
 
+# Each part of the project that needs more Debian packages lists them in tools/deps.d/NAME.list
+# (one package per line, '#' comments); tools/deps.d/NAME.sh scripts run afterwards (npm tooling for
+# the browser tests, for instance), each idempotent.
+shopt -s nullglob
+here=$(cd "$(dirname "$0")" && pwd)
+for list in "$here"/deps.d/*.list; do
+  while read -r pkg _; do
+    case "$pkg" in ''|'#'*) continue ;; esac
+    PACKAGES+=("$pkg")
+  done < "$list"
+done
+
+run_hooks() {
+  for hook in "$here"/deps.d/*.sh; do
+    bash "$hook"
+  done
+}
+
 missing=()
 for p in "${PACKAGES[@]}"; do
   if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
@@ -27,6 +45,7 @@ done
 
 if [ ${#missing[@]} -eq 0 ]; then
   echo "deps: all ${#PACKAGES[@]} packages present"
+  run_hooks
   exit 0
 fi
 
@@ -45,3 +64,4 @@ export DEBIAN_FRONTEND=noninteractive
 "${SUDO[@]}" apt-get update -qq
 "${SUDO[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
 echo "deps: done"
+run_hooks
