@@ -110,6 +110,8 @@ json Daemon::status_json() {
          {"velocity_clamps", st.velocity_clamps},
          {"accel_clamps", st.accel_clamps},
          {"limits_generation", st.limits_generation},
+         {"stop", to_string(st.stop_phase)},
+         {"soft_limits_mm", {{"min", arr3(st.soft_min_mm, axes)}, {"max", arr3(st.soft_max_mm, axes)}}},
          {"spindle_rpm_cmd", st.spindle_rpm_cmd},
          {"counters", counters_json(st)},
          {"spindle",
@@ -672,7 +674,14 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
       }
       const MachineState now = post_and_wait({CommandKind::kReset}, st.state, 1.0);
       if (now == S::kFault || now == S::kEstop) {
-        throw CommandError("reset refused: the cause (" + std::string(to_string(st.cause)) + ") is still present");
+        // The loop's reset rule names what is still missing (SafetySupervisor::reset_block).
+        const ResetBlock b = loop_->status().reset_block;
+        std::string why = b ? describe(b) : "the cause is still present";
+        if (b && b.axis >= 0 && b.axis < static_cast<int>(cfg_.machine.axes.size())) {
+          why += " (axis " + cfg_.machine.axes[static_cast<std::size_t>(b.axis)].name + ")";
+        }
+        throw CommandError("reset refused: " + why + "; fault cause " +
+                           std::string(to_string(st.cause)));
       }
       const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
       while (loop_->status().state != S::kReady && std::chrono::steady_clock::now() < until) {
