@@ -286,3 +286,40 @@ TEST(Planner, LoadErrorsNameFileLineColumnAndSoftLimits) {
 
 }  // namespace
 }  // namespace contour::daemon
+
+namespace contour::daemon {
+namespace {
+
+// Issue 16: `disable` (and SIGTERM, which disables) never sends "disable voltage" while an axis
+// moves: a jog at 40 mm/s is ramped down first, the drives stay enabled with a zero command until
+// the axes stand still, then they are disabled.
+TEST(ServoLoop, DisableWhileJoggingRampsDownAndSwitchesOffOnlyAtStandstill) {
+  Rig r(test_rig::sim_config());
+  ASSERT_TRUE(r.enable());
+  r.loop.post({CommandKind::kJog, 0, 40.0, 100.0});
+  r.step(400);  // at speed
+  ASSERT_TRUE(r.loop.status().jogging);
+  r.loop.post({CommandKind::kDisable});
+  BusFeedback fb;
+  double prev = 1e9;
+  bool off = false;
+  for (int k = 0; k < 3000 && !off; ++k) {
+    r.step();
+    r.bus.read(fb);
+    const auto st = r.loop.status();
+    if (st.state != MachineState::kDisabled) continue;
+    EXPECT_LE(std::abs(st.cmd_mm_s[0]), prev + 1e-9) << k;
+    prev = std::abs(st.cmd_mm_s[0]);
+    if (r.bus.written_mode() == DriveMode::kDisabled) {
+      off = true;
+      EXPECT_LT(std::abs(fb.axis[0].velocity_mm_s), r.cfg.safety.standstill_velocity_mm_s);
+      EXPECT_EQ(st.stop_phase, StopSource::Phase::kOff);
+    } else {
+      EXPECT_EQ(st.source, SourceKind::kStop);
+    }
+  }
+  EXPECT_TRUE(off);
+}
+
+}  // namespace
+}  // namespace contour::daemon
