@@ -21,6 +21,7 @@ export class Scope {
     this.head = 0;
     this.x = new Float64Array(CAP);
     this.cols = SCOPE_SERIES.map(() => new Float64Array(CAP));
+    // byJob: samples of each job while it ran (in_program), what the browser tests count.
     this.stats = { samples: 0, batches: 0, dropped: 0, daemon_dropped: 0, gaps: 0, byJob: {} };
     this.dirty = false;
     const series = [{ label: 't (s)', value: (u, v) => (v == null ? '—' : v.toFixed(3)) }];
@@ -55,7 +56,8 @@ export class Scope {
     this.stats.gaps = p.gaps;
     for (let i = 0; i < n; i++) {
       const j = p.job[i];
-      if (j) this.stats.byJob[j] = (this.stats.byJob[j] || 0) + 1;
+      const running = p.signals.in_program ? p.signals.in_program[i] === 1 : true;
+      if (j && running) this.stats.byJob[j] = (this.stats.byJob[j] || 0) + 1;
       const k = this.head;
       this.x[k] = p.cycle[i] / 1000;
       SCOPE_SERIES.forEach((s, si) => {
