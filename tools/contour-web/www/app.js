@@ -206,6 +206,7 @@ function escapeHtml(s) {
 // --- commands -----------------------------------------------------------------------------------
 async function command(method, params, msgEl = '#cmd-msg') {
   const el = $(msgEl);
+  state.sentAt = { ...(state.sentAt || {}), [method]: Date.now() };  // the tests time from here too
   try {
     const r = await rpc.call(method, params);
     if (el) { el.textContent = `${method}: ok`; el.className = 'msg ok'; }
