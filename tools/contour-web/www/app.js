@@ -108,10 +108,14 @@ rpc.on('notify_scope', (p) => {
   if (s.act_x_mm && s.true_error_um && s.in_program) {
     toolpath.addSamples(p.job, s.act_x_mm, s.act_y_mm, s.act_z_mm, s.true_error_um, s.in_program);
   }
-  if (state.circle && state.circle.job && s.act_x_mm) {
+  if (state.circle && state.circle.job && s.act_x_mm && s.progress_mm) {
+    // The arc only: reference progress past the approach move (the interpolator's FIR blends the
+    // two, so line numbers alone would let approach samples in).
+    const c = state.circle;
     for (let i = 0; i < p.cycle.length; i++) {
-      if (p.job[i] === state.circle.job && p.line[i] === state.circle.line) {
-        state.circle.samples.push([s.act_x_mm[i], s.act_y_mm[i]]);
+      const prog = s.progress_mm[i];
+      if (p.job[i] === c.job && prog >= c.approach_mm && prog <= c.approach_mm + 2 * Math.PI * c.R) {
+        c.samples.push([s.act_x_mm[i], s.act_y_mm[i]]);
       }
     }
   }
@@ -133,7 +137,9 @@ function applyStatus(diff) {
   $('#state').className = `state s-${s}`;
   const fault = st.fault ? `${st.fault.cause}${st.fault.axis >= 0 ? ` axis ${st.fault.axis}` : ''}` +
     (st.fault.value ? ` (${fmt(st.fault.value)} > ${fmt(st.fault.limit)})` : '') : '';
-  const cause = st.daemon_error || fault || (st.cause && st.cause !== 'none' ? st.cause : '');
+  // The cause matters while it holds the machine (FAULT/ESTOP); status keeps the last one after.
+  const stopped = s === 'FAULT' || s === 'ESTOP';
+  const cause = st.daemon_error || (stopped ? fault || (st.cause && st.cause !== 'none' ? st.cause : '') : '');
   $('#cause').textContent = cause;
   $('#btn-reset').title = cause ? `reset: cause ${cause}` : 'reset (FAULT/ESTOP only)';
   renderDro(st);
@@ -354,7 +360,8 @@ function renderGains(g) {
 $('#btn-circle').addEventListener('click', async () => {
   const R = Number($('#circle-r').value), F = Number($('#circle-f').value);
   const prog = `(circle test)\nG21 G90 G17\nG1 X${R} Y0 F3000\nG2 X${R} Y0 I${-R} J0 F${F}\nM2\n`;
-  state.circle = { R, F, job: 0, line: 4, samples: [] };
+  const at = state.status.act_mm || [0, 0, 0];
+  state.circle = { R, F, job: 0, samples: [], approach_mm: Math.hypot(R - at[0], at[1]) };
   try {
     const r = await command('run', { program: prog, name: 'circle-test.ngc' }, '#circle-msg');
     state.circle.job = r.job;
