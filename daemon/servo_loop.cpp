@@ -668,6 +668,7 @@ void ServoLoop::publish_cycle() noexcept {
     s.force_N = fb_.force_N;
     s.force_override = force_.feed_override();
     s.spindle_rpm = force_.spindle_rpm_cmd();
+    s.lateness_us = lateness_us_;
     telemetry_.push(s);
   }
   publish();
@@ -771,6 +772,7 @@ void ServoLoop::run(const std::atomic<bool>& stop) noexcept {
   clock.start();
   while (!stop.load(std::memory_order_acquire)) {
     const std::int64_t wake = clock.wait_next(stats_);
+    lateness_us_ = static_cast<float>(static_cast<double>(wake - clock.deadline_ns()) * 1e-3);
     cycle();
     clock.end_cycle(stats_, wake);
   }

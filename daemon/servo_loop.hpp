@@ -119,6 +119,7 @@ struct TelemetrySample {
   double force_N = 0.0;     // averaged (filtered) resultant force, 0 without a dynamometer
   double force_override = 1.0;
   double spindle_rpm = 0.0;
+  float lateness_us = 0.0F;  // wake-up lateness of this cycle (0 when cycle() is stepped by a test)
 };
 
 // Published status (seqlock).
@@ -323,6 +324,7 @@ class ServoLoop {
 
   // Cycle state.
   std::uint64_t cycle_ = 0;
+  float lateness_us_ = 0.0F;  // set by run() before each cycle
   static constexpr int kResetWindowCycles = 250;  // a pending `reset` waits this long for causes
   int reset_pending_cycles_ = 0;
   Feedback fb_{};
