@@ -42,13 +42,13 @@ contour::config::Config load(const std::string& extra) {
 
 // ---- config -------------------------------------------------------------------------------
 
-TEST(ShopnetConfig, AbsentSectionsAreNotPresent) {
+TEST(BridgeConfig, AbsentSectionsAreNotPresent) {
   const auto c = load("");
   EXPECT_FALSE(c.mqtt.present);
   EXPECT_FALSE(c.mtconnect.present);
 }
 
-TEST(ShopnetConfig, DefaultsAndEveryKey) {
+TEST(BridgeConfig, DefaultsAndEveryKey) {
   auto c = load("mqtt:\n  machine_id: m-7\n");
   EXPECT_TRUE(c.mqtt.present);
   EXPECT_EQ(c.mqtt.host, "localhost");
@@ -107,7 +107,7 @@ mtconnect:
   EXPECT_EQ(c.mtconnect.heartbeat_ms, 10000);
 }
 
-TEST(ShopnetConfig, ErrorsNameTheKeyAndLine) {
+TEST(BridgeConfig, ErrorsNameTheKeyAndLine) {
   const std::string base = sim_yaml();
   // `mqtt:` is the line after sim.yaml's last; its map (where a missing key is reported) the next.
   const int map_line = static_cast<int>(std::count(base.begin(), base.end(), '\n')) + 2;
@@ -158,7 +158,7 @@ std::vector<std::string> drain(OutQueue& q) {
   return v;
 }
 
-TEST(OutQueue, OldestPositionsGoFirstEventsStay) {
+TEST(BridgeQueue, OldestPositionsGoFirstEventsStay) {
   OutQueue q(4);
   q.push(msg(MsgClass::kPosition, "p1"));
   q.push(msg(MsgClass::kEvent, "e1"));
@@ -174,7 +174,7 @@ TEST(OutQueue, OldestPositionsGoFirstEventsStay) {
   EXPECT_EQ(drain(q), (std::vector<std::string>{"e1", "e2", "e3", "j1"}));
 }
 
-TEST(OutQueue, EventsDroppedOnlyWhenNothingElseIsLeftAndCounted) {
+TEST(BridgeQueue, EventsDroppedOnlyWhenNothingElseIsLeftAndCounted) {
   OutQueue q(3);
   for (const char* e : {"e1", "e2", "e3", "e4"}) q.push(msg(MsgClass::kEvent, e));
   EXPECT_EQ(q.counters().dropped_events, 1u);
@@ -182,7 +182,7 @@ TEST(OutQueue, EventsDroppedOnlyWhenNothingElseIsLeftAndCounted) {
   EXPECT_EQ(q.counters().high_water, 3u);
 }
 
-TEST(OutQueue, StateSnapshotsCoalesceLatestWins) {
+TEST(BridgeQueue, StateSnapshotsCoalesceLatestWins) {
   OutQueue q(10);
   q.push(msg(MsgClass::kState, "s1", "state"));
   q.push(msg(MsgClass::kEvent, "e1"));
@@ -195,7 +195,7 @@ TEST(OutQueue, StateSnapshotsCoalesceLatestWins) {
   EXPECT_EQ(drain(q), (std::vector<std::string>{"e1", "s2", "b2"}));
 }
 
-TEST(OutQueue, FullOfEventsAStateSnapshotGivesWayBeforeAnEvent) {
+TEST(BridgeQueue, FullOfEventsAStateSnapshotGivesWayBeforeAnEvent) {
   OutQueue q(2);
   q.push(msg(MsgClass::kState, "s1", "state"));
   q.push(msg(MsgClass::kEvent, "e1"));
@@ -208,7 +208,7 @@ TEST(OutQueue, FullOfEventsAStateSnapshotGivesWayBeforeAnEvent) {
 
 std::string daemon_text(contour::daemon::RtEvent e) { return contour::daemon::describe(e); }
 
-TEST(Payloads, ClassifiesTheDaemonsEventTexts) {
+TEST(BridgePayloads, ClassifiesTheDaemonsEventTexts) {
   using contour::daemon::EventKind;
   using contour::daemon::FaultCause;
   using contour::daemon::MachineState;
@@ -308,7 +308,7 @@ json fault_status() {
   return s;
 }
 
-TEST(Payloads, StateMapsToMtconnectVocabulary) {
+TEST(BridgePayloads, StateMapsToMtconnectVocabulary) {
   const Identity id{"m1", {"X", "Y", "Z"}};
   auto p = state_payload(ready_status(), id, true);
   EXPECT_EQ(p["state"], "READY");
@@ -352,7 +352,7 @@ TEST(Payloads, StateMapsToMtconnectVocabulary) {
   EXPECT_NE(state_payload(a, id, true), state_payload(b, id, true));
 }
 
-TEST(Payloads, PositionFeedAndWorkCoordinates) {
+TEST(BridgePayloads, PositionFeedAndWorkCoordinates) {
   const Identity id{"m1", {"X", "Y", "Z"}};
   json st = running_status();
   auto p = position_payload(st, id);
@@ -370,7 +370,7 @@ TEST(Payloads, PositionFeedAndWorkCoordinates) {
   EXPECT_TRUE(std::isinf(max_axis_move_mm(st, json())));
 }
 
-TEST(Payloads, EventPayloadAndTimeStamps) {
+TEST(BridgePayloads, EventPayloadAndTimeStamps) {
   EXPECT_EQ(iso8601_utc(0), "1970-01-01T00:00:00.000Z");
   EXPECT_EQ(iso8601_utc(1234567), "1970-01-01T00:00:01.234Z");
   DaemonEvent e;
@@ -389,7 +389,7 @@ TEST(Payloads, EventPayloadAndTimeStamps) {
   EXPECT_EQ(p["ts"], "1970-01-01T00:00:01.234Z");
 }
 
-TEST(Bridge, TopicsAndEnvironmentExpansion) {
+TEST(BridgeTopics, TopicsAndEnvironmentExpansion) {
   contour::config::MqttConfig c;
   c.topic_prefix = "plant/contourd";
   c.machine_id = "m9";
@@ -442,7 +442,7 @@ void expect_valid_shdr(const std::vector<std::string>& lines, const std::vector<
   }
 }
 
-TEST(Shdr, SnapshotHasEveryItemAndValidLines) {
+TEST(BridgeShdrModel, SnapshotHasEveryItemAndValidLines) {
   const std::vector<std::string> axes{"X", "Y", "Z"};
   ShdrModel m(axes, true);
   m.update(ready_status(), true);
@@ -465,7 +465,7 @@ TEST(Shdr, SnapshotHasEveryItemAndValidLines) {
   for (const auto& it : ns.items()) EXPECT_NE(it.key.substr(0, 1), "S") << it.key;
 }
 
-TEST(Shdr, ChangedLinesOnlyWhatChangedAndConditions) {
+TEST(BridgeShdrModel, ChangedLinesOnlyWhatChangedAndConditions) {
   ShdrModel m({"X", "Y", "Z"}, true);
   m.update(ready_status(), true);
   const std::string ts = "2026-01-01T00:00:00.000Z";
@@ -507,7 +507,7 @@ TEST(Shdr, ChangedLinesOnlyWhatChangedAndConditions) {
   EXPECT_NE(all.find("|system|UNAVAILABLE||||"), std::string::npos);
 }
 
-TEST(Shdr, FieldsNeverBreakTheLine) {
+TEST(BridgeShdrModel, FieldsNeverBreakTheLine) {
   EXPECT_EQ(shdr_field("a|b\nc\rd"), "a/b c d");
   ShdrModel m({"X"}, false);
   json st = ready_status();
@@ -519,7 +519,7 @@ TEST(Shdr, FieldsNeverBreakTheLine) {
   expect_valid_shdr(m.snapshot_lines("2026-01-01T00:00:00.000Z"), m.items());
 }
 
-TEST(Shdr, JobKpisFromTheResult) {
+TEST(BridgeShdrModel, JobKpisFromTheResult) {
   ShdrModel m({"X", "Y", "Z"}, true);
   m.set_job_result(json{{"job", 5}, {"completed", true}, {"duration_s", 3.427},
                         {"max_contour_error_um", 47.9119}, {"rms_contour_error_um", 9.4633},
@@ -532,7 +532,7 @@ TEST(Shdr, JobKpisFromTheResult) {
   EXPECT_EQ(m.value("job_duration"), "3.427");
 }
 
-TEST(DevicesXml, NamesEveryShdrKeyOnceWithTheExtensionNamespace) {
+TEST(BridgeDevicesXml, NamesEveryShdrKeyOnceWithTheExtensionNamespace) {
   DeviceInfo d;
   d.name = "m1";
   d.uuid = "contourd-m1";
@@ -582,7 +582,7 @@ std::string write_cred(const std::string& text, mode_t mode) {
   return p.string();
 }
 
-TEST(Credentials, ReadsAnOwnerOnlyFile) {
+TEST(BridgeCredentials, ReadsAnOwnerOnlyFile) {
   const auto p = write_cred("# broker\nusername: bridge-m1\npassword:  s3cr3t:with:colons \n", 0600);
   const Credentials c = load_credentials(p);
   EXPECT_EQ(c.username, "bridge-m1");
@@ -590,7 +590,7 @@ TEST(Credentials, ReadsAnOwnerOnlyFile) {
   std::filesystem::remove(p);
 }
 
-TEST(Credentials, RefusesOtherModesAndNeverShowsTheSecret) {
+TEST(BridgeCredentials, RefusesOtherModesAndNeverShowsTheSecret) {
   const std::string secret = "hunter2-Secret";
   auto p = write_cred("username: u\npassword: " + secret + "\n", 0644);
   try {
