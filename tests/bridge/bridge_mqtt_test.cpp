@@ -344,7 +344,16 @@ bool make_certs(const TempDir& dir) {
       "&& openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -keyout server.key "
       "-out server.csr -subj /CN=localhost "
       "&& openssl x509 -req -in server.csr -CA ca.crt -CAkey ca.key -CAcreateserial -out "
-      "server.crt -days 2 -extfile san.ext && chmod 644 server.key";
+      "server.crt -days 2 -extfile san.ext && chmod 644 server.key "
+      // The bridge's client certificate, its key protected by a passphrase; the reader's.
+      "&& openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -keyout client.key "
+      "-passout pass:key-Passphrase-9 -out client.csr -subj /CN=bridge-m3 "
+      "&& openssl x509 -req -in client.csr -CA ca.crt -CAkey ca.key -CAcreateserial -out "
+      "client.crt -days 2 "
+      "&& openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -keyout reader.key "
+      "-out reader.csr -subj /CN=reader "
+      "&& openssl x509 -req -in reader.csr -CA ca.crt -CAkey ca.key -CAcreateserial -out "
+      "reader.crt -days 2 && chmod 644 client.key reader.key";
   return std::system(("(" + cmd + ") >" + d + "/certs.log 2>&1").c_str()) == 0;
 }
 
@@ -407,6 +416,35 @@ TEST(BridgeMqtt, TlsWithPasswordFromAnOwnerOnlyFile) {
         << bridge.err();
     EXPECT_TRUE(bridge.running());
     EXPECT_EQ(bridge.err().find(secret), std::string::npos) << "the password was logged";
+  }
+  {
+    // Client certificates instead of a password (the broker takes the certificate's CN as the
+    // user name); the key's passphrase comes from the credentials file.
+    const int cport = free_port();
+    TempDir bdir("tls_cert_broker");
+    Broker cbroker(bdir.path(), cport,
+                   "cafile " + dir / "ca.crt" + "\ncertfile " + dir / "server.crt" + "\nkeyfile " +
+                       dir / "server.key" +
+                       "\nrequire_certificate true\nuse_identity_as_username true\n"
+                       "allow_anonymous false\n");
+    Subscriber::Options co;
+    co.ca_file = dir / "ca.crt";
+    co.cert_file = dir / "reader.crt";
+    co.key_file = dir / "reader.key";
+    Subscriber csub(cport, {"contourd/m3c/#"}, co);
+    ASSERT_TRUE(csub.wait_subscribed()) << cbroker.log();
+    const std::string kp = write_file(dir / "key.cred", "key_password: key-Passphrase-9\n", 0600);
+    const std::string ccfg = write_file(
+        dir / "mc.yaml",
+        sim_config(mqtt_section(cport, "m3c", "  tls:\n    ca_file: " + dir / "ca.crt" +
+                                                   "\n    cert_file: " + dir / "client.crt" +
+                                                   "\n    key_file: " + dir / "client.key" +
+                                                   "\n  credentials_file: " + kp + "\n")));
+    Child bridge = start_bridge(dir, ccfg, d.sock(), "bridge_cert");
+    ASSERT_TRUE(csub.wait_topic("contourd/m3c/state", seconds(30),
+                                [](const json& j) { return j.value("state", "") == "READY"; }))
+        << bridge.err() << cbroker.log();
+    EXPECT_EQ(bridge.err().find("key-Passphrase-9"), std::string::npos) << "the passphrase was logged";
   }
   {
     // The credentials file readable by others: refused at start, exit 78, the fix named.

@@ -214,7 +214,7 @@ class Subscriber {
     std::string client_id;
     bool clean_session = true;
     int qos = 1;
-    std::string username, password, ca_file;
+    std::string username, password, ca_file, cert_file, key_file;
   };
 
   Subscriber(int port, std::vector<std::string> topics, Options opt)
@@ -229,7 +229,11 @@ class Subscriber {
     if (!opt_.username.empty()) {
       mosquitto_username_pw_set(m_, opt_.username.c_str(), opt_.password.c_str());
     }
-    if (!opt_.ca_file.empty()) mosquitto_tls_set(m_, opt_.ca_file.c_str(), nullptr, nullptr, nullptr, nullptr);
+    if (!opt_.ca_file.empty()) {
+      mosquitto_tls_set(m_, opt_.ca_file.c_str(), nullptr,
+                        opt_.cert_file.empty() ? nullptr : opt_.cert_file.c_str(),
+                        opt_.key_file.empty() ? nullptr : opt_.key_file.c_str(), nullptr);
+    }
     mosquitto_connect_async(m_, "127.0.0.1", port, 10);
     mosquitto_loop_start(m_);
   }

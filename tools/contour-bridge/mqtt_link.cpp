@@ -91,8 +91,10 @@ MqttLink::~MqttLink() {
   if (m_ != nullptr) mosquitto_destroy(m_);
 }
 
-int MqttLink::password_cb(char* buf, int size, int, void* self) {
-  const auto* me = static_cast<MqttLink*>(self);
+int MqttLink::password_cb(char* buf, int size, int, void* mosq) {
+  // OpenSSL's user data here is the `struct mosquitto*` (libmosquitto sets it so), not ours.
+  const auto* me = static_cast<MqttLink*>(mosquitto_userdata(static_cast<mosquitto*>(mosq)));
+  if (me == nullptr) return 0;
   const std::string& pw = me->cred_.key_password;
   if (size <= 0) return 0;
   const int n = std::min(static_cast<int>(pw.size()), size - 1);

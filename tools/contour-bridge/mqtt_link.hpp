@@ -82,7 +82,7 @@ class MqttLink {
   static void on_disconnect_cb(mosquitto*, void* self, int rc);
   static void on_publish_cb(mosquitto*, void* self, int mid);
   static void on_message_cb(mosquitto*, void* self, const mosquitto_message* m);
-  static int password_cb(char* buf, int size, int rwflag, void* self);
+  static int password_cb(char* buf, int size, int rwflag, void* mosq);
 
   void attempt(Clock::time_point now);
   void schedule_retry(Clock::time_point now);

@@ -300,7 +300,8 @@ int run_fleet(int argc, char** argv) {
   CLI::App app{"contour-bridge-fleet: N contourd + N contour-bridge + one broker + one subscriber"};
   int machines = 20, programs = 3;
   double position_rate = 10.0;
-  bool check = false, as_json = false;
+  bool check = false, as_json = false, without_bridges = false, rt = false;
+  double state_rate = 10.0;
   std::string program = std::string(CONTOUR_SOURCE_DIR) + "/config/programs/table2.ngc";
   std::string keep;
   app.add_option("--machines", machines, "contourd instances (each with its bridge)")->check(CLI::Range(1, 200));
@@ -308,6 +309,10 @@ int run_fleet(int argc, char** argv) {
   app.add_option("--program", program, "part program (RS274/NGC)");
   app.add_option("--position-rate", position_rate, "mqtt.position_rate_hz of every bridge");
   app.add_flag("--check", check, "exit 1 unless every job summary arrived");
+  app.add_flag("--without-bridges", without_bridges,
+               "daemons only (the loop-timing baseline to compare with)");
+  app.add_flag("--rt", rt, "keep config/sim.yaml's SCHED_FIFO loop (needs the privilege)");
+  app.add_option("--state-rate", state_rate, "mqtt.state_rate_hz (status reads per second)");
   app.add_flag("--json", as_json, "only the JSON summary on stdout");
   app.add_option("--keep", keep, "work directory to create and keep (logs, configs)");
   CLI11_PARSE(app, argc, argv);
@@ -349,8 +354,10 @@ int run_fleet(int argc, char** argv) {
     const auto p = sim.find(a);
     if (p != std::string::npos) sim.replace(p, a.size(), b);
   };
-  replace("priority: 80", "priority: 0");  // 2N processes on a shared machine: no SCHED_FIFO
-  replace("lock_memory: true", "lock_memory: false");
+  if (!rt) {
+    replace("priority: 80", "priority: 0");  // 2N processes on a shared machine: no SCHED_FIFO
+    replace("lock_memory: true", "lock_memory: false");
+  }
   replace("directory: /tmp", "directory: " + dir.string());
   std::vector<pid_t> daemons, bridges;
   std::vector<std::string> socks, ids;
@@ -361,7 +368,7 @@ int run_fleet(int argc, char** argv) {
     const std::string cfg = (dir / (std::string(id) + ".yaml")).string();
     std::ofstream(cfg) << sim << "mqtt:\n  host: 127.0.0.1\n  port: " << port
                        << "\n  machine_id: " << id << "\n  position_rate_hz: " << position_rate
-                       << "\n  status_interval_s: 5\n";
+                       << "\n  state_rate_hz: " << state_rate << "\n  status_interval_s: 5\n";
     socks.push_back((dir / (std::string(id) + ".sock")).string());
     daemons.push_back(spawn({contourd_bin, "--config", cfg, "--socket", socks.back()},
                             (dir / (std::string(id) + ".contourd.log")).string()));
@@ -381,13 +388,28 @@ int run_fleet(int argc, char** argv) {
     if (!ready) {
       std::fprintf(stderr, "contour-bridge-fleet: %s not READY\n", ids[static_cast<std::size_t>(i)].c_str());
     }
+    if (without_bridges) continue;
     bridges.push_back(spawn({bridge_bin, "--config", (dir / (ids[static_cast<std::size_t>(i)] + ".yaml")).string(),
                              "--socket", socks[static_cast<std::size_t>(i)]},
                             (dir / (ids[static_cast<std::size_t>(i)] + ".bridge.log")).string()));
   }
   for (const auto& id : ids) {
-    while (!sub.has_state(id) && Clock::now() < up_until) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    while (!without_bridges && !sub.has_state(id) && Clock::now() < up_until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
   }
+  // The loops' timing counters before and after the runs (RT isolation: with and without bridges).
+  auto loop_timing = [&] {
+    json t = json::array();
+    for (const auto& sk : socks) {
+      Ctl c;
+      json st;
+      if (c.connect(sk)) st = c.call({{"cmd", "status"}});
+      t.push_back(st.value("ok", false) ? st["result"]["timing"] : json::object());
+    }
+    return t;
+  };
+  const json timing0 = loop_timing();
 
   // Every machine runs the program `programs` times, each from the origin.
   const double cpu_broker0 = cpu_s(broker);
@@ -445,9 +467,20 @@ int run_fleet(int argc, char** argv) {
   }
   for (auto& t : drivers) t.join();
   const auto t_runs = Clock::now();
+  const json timing1 = loop_timing();
+  std::uint64_t overruns = 0, cycles = 0;
+  double lateness_max_us = 0.0, lateness_p99_us = 0.0;
+  for (std::size_t i = 0; i < socks.size(); ++i) {
+    overruns += timing1[i].value("overruns", 0ULL) - timing0[i].value("overruns", 0ULL);
+    cycles += timing1[i].value("cycles", 0ULL) - timing0[i].value("cycles", 0ULL);
+    lateness_max_us = std::max(lateness_max_us, timing1[i].value("lateness_max_us", 0.0));
+    lateness_p99_us = std::max(lateness_p99_us, timing1[i].value("lateness_p99_us", 0.0));
+  }
   const std::size_t expected = static_cast<std::size_t>(machines * programs);
   const auto until = Clock::now() + std::chrono::seconds(60);
-  while (sub.jobs() < expected && Clock::now() < until) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  while (!without_bridges && sub.jobs() < expected && Clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
   const auto t1 = Clock::now();
   const double cpu_broker = cpu_s(broker) - cpu_broker0;
   double cpu_bridges = 0.0;
@@ -473,6 +506,7 @@ int run_fleet(int argc, char** argv) {
       const auto job = res.is_object() ? res.value("job", 0ULL) : 0ULL;
       auto& mj = jobs[ids[static_cast<std::size_t>(i)]];
       auto it = mj.find(job);
+      if (without_bridges) continue;
       if (job == 0 || it == mj.end()) {
         ++missing;
         continue;
@@ -497,7 +531,12 @@ int run_fleet(int argc, char** argv) {
            {"runs_taken_late", late_runs.load()},
            {"broker_cpu_s", cpu_broker},
            {"bridges_cpu_s", cpu_bridges},
-           {"drain_s", std::chrono::duration<double>(t1 - t_runs).count()}};
+           {"drain_s", std::chrono::duration<double>(t1 - t_runs).count()},
+           {"bridges", !without_bridges},
+           {"loop", {{"cycles", cycles},
+                     {"overruns", overruns},
+                     {"lateness_p99_us_max", lateness_p99_us},
+                     {"lateness_max_us", lateness_max_us}}}};
   for (const auto& [k, n] : count) {
     json t{{"messages", n}, {"per_s", static_cast<double>(n) / window_s},
            {"per_machine_per_s", static_cast<double>(n) / window_s / machines}};
@@ -524,6 +563,10 @@ int run_fleet(int argc, char** argv) {
         std::printf("\n");
       }
     }
+    std::printf("loop: %llu cycles, %llu overruns in the window; lateness p99 %.0f us, max %.0f us "
+                "(worst daemon, since its start)\n",
+                static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(overruns),
+                lateness_p99_us, lateness_max_us);
     std::printf("total %zu messages, %.1f msg/s; job summaries %zu expected, %d missing, %d with other "
                 "figures; broker CPU %.2f s, bridges CPU %.2f s\n",
                 total, static_cast<double>(total) / window_s, expected, missing, mismatched, cpu_broker,
