@@ -99,6 +99,10 @@ Bridge::Bridge(const config::Config& cfg, const BridgeOptions& opt)
   if (mqtt_enabled_) {
     Credentials cred;
     if (!cfg_.mqtt.credentials_file.empty()) cred = load_credentials(cfg_.mqtt.credentials_file);
+    if (!cred.password.empty() && !cfg_.mqtt.tls.enabled) {
+      spdlog::warn("mqtt: a password without TLS (no mqtt.tls): it travels in clear to {}:{}",
+                   cfg_.mqtt.host, cfg_.mqtt.port);
+    }
     MqttLink::Handlers h;
     h.connected = [this] { on_mqtt_connected(); };
     h.disconnected = [this](const std::string& why) {

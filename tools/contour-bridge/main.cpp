@@ -127,6 +127,16 @@ int main(int argc, char** argv) {
       if (cfg.mqtt.present && !cfg.mqtt.credentials_file.empty()) {
         (void)contour::bridge::load_credentials(cfg.mqtt.credentials_file);
       }
+      if (cfg.mqtt.present && cfg.mqtt.tls.enabled) {
+        for (auto [key, path] : {std::pair{"ca_file", cfg.mqtt.tls.ca_file},
+                                 std::pair{"cert_file", cfg.mqtt.tls.cert_file},
+                                 std::pair{"key_file", cfg.mqtt.tls.key_file}}) {
+          if (!path.empty() && ::access(path.c_str(), R_OK) != 0) {
+            std::cerr << "mqtt.tls." << key << ": " << path << ": cannot read\n";
+            return kExitConfig;
+          }
+        }
+      }
       std::cout << "contour-bridge: " << config_path << ": OK\n";
       return 0;
     }
