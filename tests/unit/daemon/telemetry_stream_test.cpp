@@ -229,12 +229,17 @@ TEST_F(StreamServerTest, EverySampleInBatchLinesAndDecimationOnlyOnRequest) {
     return true;
   };
   // 20-sample chunks as the writer hands them over; both subscribers read as they arrive.
+  // The readers keep up (at most ~320 samples outstanding, below max_stream_samples = 500), so
+  // nothing may be dropped however slowly this host schedules the server thread.
   for (std::uint64_t c = 1; c <= 1000; c += 20) {
     server_->publish_stream("telemetry", chunk_of(c, 20));
+    const std::uint64_t end = c + 19;
     while (read_a(0)) {
     }
     while (read_b(0)) {
     }
+    while (got_a.size() + 300 < end) ASSERT_TRUE(read_a(5000)) << got_a.size();
+    while (got_b.size() * 10 + 300 < end) ASSERT_TRUE(read_b(5000)) << got_b.size();
   }
   while (got_a.size() < 1000) ASSERT_TRUE(read_a(5000)) << got_a.size();
   while (got_b.size() < 100) ASSERT_TRUE(read_b(5000)) << got_b.size();
@@ -264,10 +269,16 @@ TEST_F(StreamServerTest, ASlowSubscriberLosesItsOldestSamplesCountedAndBlocksNob
   const auto t0 = std::chrono::steady_clock::now();
   for (std::uint64_t c = 1; c <= total; c += 50) {
     server_->publish_stream("telemetry", chunk_of(c, 50, 1000));
-    // The fast subscriber keeps up (reads what is there).
+    // The fast subscriber keeps up: it reads what is there, and waits for the server whenever
+    // more than ~300 samples are outstanding (below the 500-sample queue), so it never loses one
+    // however slowly this host schedules the server thread.
     for (;;) {
       pollfd p{fast, POLLIN, 0};
-      if (::poll(&p, 1, 0) != 1) break;
+      const bool behind = got_fast.size() + 300 < c + 49;
+      if (::poll(&p, 1, behind ? 5000 : 0) != 1) {
+        ASSERT_FALSE(behind) << "fast subscriber starved at " << got_fast.size();
+        break;
+      }
       const json j = json::parse(rf.next());
       for (const auto& s : j["samples"]) got_fast.push_back(s["cycle"].get<std::uint64_t>());
     }
