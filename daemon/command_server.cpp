@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -134,6 +135,7 @@ double seconds_between(std::chrono::steady_clock::time_point a,
 }  // namespace
 
 void CommandServer::run() {
+  server_thread_id_ = std::this_thread::get_id();
   std::vector<pollfd> fds;
   std::vector<std::uint64_t> ids;
   std::vector<char> backlogged;  // client had unprocessed complete lines: served without POLLIN
@@ -482,6 +484,11 @@ void CommandServer::handle_line(Client& c, const std::string& line) {
                          " requests/s from this client (socket.max_requests_per_s); request "
                          "refused (estop, hold and stop are never refused)");
     }
+    serving_client_ = c.info.id;
+    struct Clear {
+      std::uint64_t& id;
+      ~Clear() { id = 0; }
+    } clear{serving_client_};
     return handler_(req, c.info);
   });
   {
@@ -498,6 +505,32 @@ void CommandServer::handle_line(Client& c, const std::string& line) {
                "and stop");
   }
   queue(c, r.reply);
+}
+
+namespace {
+bool mentions_safety_command(std::string_view bytes) {
+  // "stop" also matches "estop"; a false positive only ends another handler's wait early.
+  return bytes.find("stop") != std::string_view::npos || bytes.find("hold") != std::string_view::npos;
+}
+}  // namespace
+
+bool CommandServer::safety_request_waiting() {
+  if (std::this_thread::get_id() != server_thread_id_) return false;
+  if (listen_fd_ >= 0) {
+    pollfd p{listen_fd_, POLLIN, 0};
+    if (::poll(&p, 1, 0) > 0 && (p.revents & POLLIN) != 0) return true;  // a new client
+  }
+  std::array<char, 4096> buf{};
+  std::lock_guard lk(mu_);
+  for (const auto& [id, c] : clients_) {
+    if (id == serving_client_ || c.fd < 0) continue;
+    if (mentions_safety_command(c.in)) return true;
+    const ssize_t n = ::recv(c.fd, buf.data(), buf.size(), MSG_PEEK | MSG_DONTWAIT);
+    if (n > 0 && mentions_safety_command(std::string_view(buf.data(), static_cast<std::size_t>(n)))) {
+      return true;
+    }
+  }
+  return false;
 }
 
 void CommandServer::queue(Client& c, const nlohmann::json& j) {

@@ -168,6 +168,13 @@ class CommandServer {
   using DisconnectHandler = std::function<void(const ClientInfo&)>;
   void on_disconnect(DisconnectHandler h) { on_disconnect_ = std::move(h); }
 
+  // For a handler that waits (on the server thread) for the loop: true when another client has
+  // sent, or is connecting to send, what may be a safety request (`estop`, `hold`, `stop`). The
+  // handler then stops waiting and replies with what it has, so the next round serves that request:
+  // a long `stop` or `result` never delays another client's E-stop. Server thread only (false
+  // elsewhere); the bytes are peeked, never consumed.
+  [[nodiscard]] bool safety_request_waiting();
+
   [[nodiscard]] CommandServerStats stats() const;
   [[nodiscard]] const std::string& path() const { return opt_.path; }
 
@@ -230,6 +237,8 @@ class CommandServer {
   Handler handler_;
   NoticeHandler on_notice_;
   int listen_fd_ = -1;
+  std::uint64_t serving_client_ = 0;  // the client whose request the handler runs (0: none)
+  std::thread::id server_thread_id_{};
   int wake_pipe_[2] = {-1, -1};
   std::thread thread_;
   std::atomic<bool> running_{false};

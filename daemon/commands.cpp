@@ -292,7 +292,7 @@ json Daemon::result_json(std::uint64_t job) {
   const auto st = loop_->status();
   const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
   while (st.finished_job == job && writer_->last_cycle() < st.finished_cycle &&
-         std::chrono::steady_clock::now() < until) {
+         std::chrono::steady_clock::now() < until && !safety_request_waiting()) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   const RunStats rs = writer_->stats(job);
@@ -662,6 +662,8 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
       while (std::chrono::steady_clock::now() < until) {
         const auto s = loop_->status();
         if (s.cycle > st.cycle + 2 && s.state != S::kRunning && s.state != S::kHold && !s.jogging) break;
+        // The stop goes on in the loop; another client's E-stop must not wait for its end.
+        if (s.cycle > st.cycle + 2 && safety_request_waiting()) break;
         std::this_thread::sleep_for(std::chrono::milliseconds(2));
       }
       loaded_job_ = 0;
@@ -692,7 +694,8 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
                            std::string(to_string(st.cause)));
       }
       const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
-      while (loop_->status().state != S::kReady && std::chrono::steady_clock::now() < until) {
+      while (loop_->status().state != S::kReady && std::chrono::steady_clock::now() < until &&
+             !safety_request_waiting()) {
         std::this_thread::sleep_for(std::chrono::milliseconds(1));
       }
       return status_json();

@@ -124,6 +124,10 @@ class Daemon {
   std::unique_ptr<TelemetryWriter> writer_;
   std::unique_ptr<EventLogger> logger_;
   std::unique_ptr<ProgramPlanner> planner_;
+  // A waiting handler gives way to another client's estop/hold/stop (CommandServer).
+  [[nodiscard]] bool safety_request_waiting() const {
+    return server_ != nullptr && server_->safety_request_waiting();
+  }
   std::unique_ptr<CommandServer> server_;
   RtThread rt_;
   RtSetupReport rt_report_;

@@ -342,3 +342,53 @@ TEST(SocketLockout, SigusrOneIsEstopAndSigusrTwoIsHold) {
 }
 
 }  // namespace
+
+// A `stop` whose end takes long (a jog braking at 2 mm/s^2) keeps its client waiting for the
+// reply, but never another client's E-stop: the server thread leaves the stop's wait as soon as
+// another request that may be a safety command arrives. Measured in loop cycles, not wall time:
+// before this rule the E-stop's reply came only after the jog had braked (1,262 cycles later here).
+TEST(SocketLockout, ALongStopDoesNotDelayAnotherClientsEstop) {
+  std::string text = contour::test::slurp(kSrc + "/config/sim.yaml");
+  const std::string vmax = "max_velocity_mm_min: 10000\n";
+  const std::size_t at = text.find(vmax);  // axis X
+  ASSERT_NE(at, std::string::npos);
+  text.insert(at + vmax.size(), "      max_accel_mm_s2: 2\n");
+  const fs::path cfg =
+      fs::temp_directory_path() / ("contourd_longstop_" + std::to_string(::getpid()) + ".yaml");
+  std::ofstream(cfg) << text;
+  contour::test::DaemonProcess d("longstop", {cfg.string(), {}, 1000, 500});
+  ASSERT_TRUE(d.connected()) << d.log();
+  d.ok({{"cmd", "jog"}, {"axis", "X"}, {"velocity_mm_min", 1200.0},
+                       {"distance_mm", 150.0}});
+  // 4 s of loop time accelerating at 2 mm/s^2: 8 mm/s, then over 1,000 cycles of braking.
+  const auto c0 = d.ok({{"cmd", "status"}})["cycle"].get<std::uint64_t>();
+  const json moving = d.wait_status([&](const json& s) {
+    return s["cycle"].get<std::uint64_t>() >= c0 + 4000;
+  });
+  ASSERT_EQ(moving["jogging"], true) << moving.dump();
+  std::printf("at the stop: X command %.3f mm/s\n", moving["cmd_mm_s"][0].get<double>());
+  const auto c_stop = moving["cycle"].get<std::uint64_t>();
+
+  // Client A: `stop`, reply not read yet (its handler waits for the jog to end).
+  const int a = contour::test::connect_unix(d.sock());
+  ASSERT_GE(a, 0);
+  send_all(a, R"({"id":1,"cmd":"stop"})" "\n");
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // let the server enter it
+  // Client B: `estop`, as contourctl sends it.
+  const json e = call_fresh(d.sock(), {{"cmd", "estop"}});
+  ASSERT_EQ(e["ok"], true) << e.dump() << "\n" << d.log();
+  EXPECT_EQ(e["result"]["state"], "ESTOP");
+  const auto c_estop = e["result"]["cycle"].get<std::uint64_t>();
+  std::printf("stop at cycle %llu, estop answered at cycle %llu (%llu cycles later)\n",
+              static_cast<unsigned long long>(c_stop), static_cast<unsigned long long>(c_estop),
+              static_cast<unsigned long long>(c_estop - c_stop));
+  EXPECT_LT(c_estop - c_stop, 600u) << "the E-stop waited for the stop's end";
+  // A's stop is answered too (with the state the machine is in).
+  const json r = json::parse(read_line(a), nullptr, false);
+  ::close(a);
+  ASSERT_TRUE(r.is_object());
+  EXPECT_EQ(r["ok"], true) << r.dump();
+  std::printf("stop answered at cycle %llu\n",
+              static_cast<unsigned long long>(r["result"].value("cycle", std::uint64_t{0})));
+  fs::remove(cfg);
+}
