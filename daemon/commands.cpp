@@ -175,6 +175,17 @@ json Daemon::status_json() {
     j["fault"] = {{"cause", to_string(st.cause)}, {"axis", st.fault_axis},
                   {"value", st.fault_value}, {"limit", st.fault_limit}};
   }
+  // A programmed pause (M0, M1, M6): what it waits for. An M6 is a manual tool change.
+  if (st.interp_holding) {
+    const std::string msg = planner_->message(st.attached_job, st.hold_message_id);
+    const ProgramPlanner::HoldSite at = planner_->message_site(st.attached_job, st.hold_message_id);
+    const int line = at.line != 0 ? at.line : st.hold_line;
+    j["hold"] = {{"line", line}, {"message", msg}};
+    if (msg.rfind("manual tool change", 0) == 0) {
+      j["tool_change"] = {{"tool", at.line != 0 ? at.tool : st.hold_tool}, {"line", line},
+                          {"message", msg}};
+    }
+  }
   return j;
 }
 
@@ -644,7 +655,9 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
         jobs_[job].overruns_at_start = loop_->stats().overruns.load();
       }
       const MachineState now = post_and_wait({CommandKind::kRun}, st.state, 1.0);
-      if (now != S::kRunning && loop_->status().finished_job != job) {
+      // A program that pauses at once (T1 M6 first, M0) is running: it waits for `resume`.
+      const bool paused = now == S::kHold && loop_->status().interp_holding;
+      if (now != S::kRunning && !paused && loop_->status().finished_job != job) {
         throw CommandError("run refused by the loop (state " + std::string(to_string(now)) + ")");
       }
       return {{"job", job}, {"state", to_string(now)}};

@@ -201,6 +201,16 @@ void Daemon::start_components() {
   writer_->start();
   logger_ = std::make_unique<EventLogger>(loop_->events(),
                                           [this](const RtEvent& e, const std::string& t) { on_event(e, t); });
+  logger_->set_describer([this](const RtEvent& e) -> std::string {
+    // A programmed pause names its line and what it waits for (M6: the tool to load). Pauses
+    // happen only in programs, which the planner (created below) planned.
+    if (e.kind != EventKind::kProgramPause || planner_ == nullptr) return {};
+    const std::string msg = planner_->message(e.job, e.axis);
+    const ProgramPlanner::HoldSite at = planner_->message_site(e.job, e.axis);
+    if (at.line == 0) return {};
+    return "program paused at line " + std::to_string(at.line) + ": " +
+           (msg.empty() ? std::string("program stop (M0/M1)") : msg);
+  });
   logger_->start();
   planner_ = std::make_unique<ProgramPlanner>(cfg_);
 

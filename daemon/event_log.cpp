@@ -136,6 +136,9 @@ std::string describe(const RtEvent& e) {
     case EventKind::kSpindleAtSpeed:
       o << "spindle at speed (" << e.limit << " rpm) after " << e.value << " s: feed move starts";
       break;
+    case EventKind::kProgramPause:
+      o << "program paused (M0/M1/M6): waits for resume";
+      break;
     case EventKind::kStandstillTimeout:
       o << "STANDSTILL TIMEOUT: axis " << e.axis << " still ";
       if (std::isnan(e.value)) {
@@ -171,7 +174,8 @@ void EventLogger::stop() {
 void EventLogger::drain() {
   RtEvent e;
   while (ring_.pop(e)) {
-    const std::string text = describe(e);
+    std::string text = describer_ ? describer_(e) : std::string();
+    if (text.empty()) text = describe(e);
     if (e.kind == EventKind::kFault || e.kind == EventKind::kStandstillTimeout) {
       spdlog::error("{}", text);
     } else if (e.kind == EventKind::kCommandRefused || e.kind == EventKind::kUnderrun ||

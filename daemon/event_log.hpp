@@ -27,6 +27,9 @@ class EventLogger {
   ~EventLogger();
   EventLogger(const EventLogger&) = delete;
   EventLogger& operator=(const EventLogger&) = delete;
+  // Optional: text for an event that needs non-RT context (a hold's message from the planner);
+  // "" keeps describe()'s. Set before start().
+  void set_describer(std::function<std::string(const RtEvent&)> f) { describer_ = std::move(f); }
   void start();
   void stop();   // drains the rest
   void drain();  // synchronous (tests)
@@ -35,6 +38,7 @@ class EventLogger {
  private:
   SpscRing<RtEvent>& ring_;
   Observer obs_;
+  std::function<std::string(const RtEvent&)> describer_;
   std::thread thread_;
   std::atomic<bool> running_{false};
 };

@@ -135,9 +135,30 @@ std::shared_ptr<ProgramJob> ProgramPlanner::start(const ProgramText& src,
     std::lock_guard lk(mu_);
     error_.clear();
     job_ = job;
+    messages_job_ = job_id;
+    messages_.clear();
+    message_sites_.clear();
   }
   thread_ = std::thread([this, job, src, start_mm, sink]() { plan(job, src, start_mm, sink); });
   return job;
+}
+
+ProgramPlanner::HoldSite ProgramPlanner::message_site(std::uint64_t job_id, int message_id) const {
+  std::lock_guard lk(mu_);
+  if (job_id != messages_job_ || message_id < 0 ||
+      static_cast<std::size_t>(message_id) >= message_sites_.size()) {
+    return {};
+  }
+  return message_sites_[static_cast<std::size_t>(message_id)];
+}
+
+std::string ProgramPlanner::message(std::uint64_t job_id, int message_id) const {
+  std::lock_guard lk(mu_);
+  if (job_id != messages_job_ || message_id < 0 ||
+      static_cast<std::size_t>(message_id) >= messages_.size()) {
+    return {};
+  }
+  return messages_[static_cast<std::size_t>(message_id)];
 }
 
 void ProgramPlanner::abort_and_join() {
@@ -180,10 +201,25 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
     std::vector<control::Block> blocks;
     std::string text;
     control::PlannedSegment seg;
+    std::size_t n_messages = 0;  // planner messages copied into messages_
     auto aborted = [&] { return job->abort.load(std::memory_order_acquire); };
     while (!aborted()) {
+      if (planner.messages().size() > n_messages) {
+        std::lock_guard lk(mu_);
+        if (messages_job_ == job->id) {
+          for (; n_messages < planner.messages().size(); ++n_messages) {
+            messages_.push_back(planner.messages()[n_messages]);
+            message_sites_.push_back({});
+          }
+        }
+      }
       while (planner.pop(seg)) {
         if (sink) sink(job->id, seg);
+        if (seg.message_id >= 0) {
+          std::lock_guard lk(mu_);
+          const auto m = static_cast<std::size_t>(seg.message_id);
+          if (messages_job_ == job->id && m < message_sites_.size()) message_sites_[m] = {seg.line, seg.tool};
+        }
         // Wait for room: the queue's push() would count a full ring as a drop.
         while (job->queue.size() >= job->queue.capacity()) {
           if (aborted()) return;

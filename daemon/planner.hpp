@@ -60,6 +60,16 @@ class ProgramPlanner {
                                     std::uint64_t job_id, SegmentSink sink);
 
   [[nodiscard]] std::string error() const;  // planning error of the last job ("" if none)
+  // The text of a hold's message (M0/M1/M6: PlannedSegment::message_id) of the current job;
+  // "" when unknown. Thread-safe.
+  [[nodiscard]] std::string message(std::uint64_t job_id, int message_id) const;
+  // The source line of that hold and the tool after it (M6: the tool to load); {0, 0} when
+  // unknown. Thread-safe.
+  struct HoldSite {
+    int line = 0;
+    int tool = 0;
+  };
+  [[nodiscard]] HoldSite message_site(std::uint64_t job_id, int message_id) const;
   void abort_and_join();
 
   // Waits until the job's queue holds at least half its capacity or planning finished.
@@ -81,6 +91,9 @@ class ProgramPlanner {
   std::shared_ptr<ProgramJob> job_;
   mutable std::mutex mu_;
   std::string error_;
+  std::uint64_t messages_job_ = 0;
+  std::vector<std::string> messages_;  // of messages_job_, copied from the planner thread
+  std::vector<HoldSite> message_sites_;  // the hold segment's line and tool per message
 };
 
 }  // namespace contour::daemon

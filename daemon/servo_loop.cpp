@@ -512,7 +512,11 @@ void ServoLoop::program_step(MachineState st, RefPoint& r) noexcept {
   }
   if (s.underrun_end) emit(EventKind::kUnderrunEnd);
   if (s.planner_failed) transition(sm_.apply(Request::kStop), FaultCause::kNone);
-  if (s.program_hold) transition(sm_.apply(Request::kHold), FaultCause::kNone);  // M0/M1/M6
+  if (s.program_hold) {  // M0/M1/M6
+    const control::InterpOutput& o = program_.output();
+    emit(EventKind::kProgramPause, FaultCause::kNone, o.message_id);
+    transition(sm_.apply(Request::kHold), FaultCause::kNone);
+  }
   if (s.spindle_at_speed) {
     emit(EventKind::kSpindleAtSpeed, FaultCause::kNone, -1, program_.last_wait_s(),
          fb_.bus.spindle.actual_rpm);
@@ -708,6 +712,9 @@ void ServoLoop::publish() noexcept {
   pub_.gains_cycle = gains_cycle_;
   pub_.jogging = jog_.active();
   pub_.interp_holding = io.status == control::InterpStatus::kHolding;
+  pub_.hold_line = pub_.interp_holding ? io.line : 0;
+  pub_.hold_tool = pub_.interp_holding ? io.tool : 0;
+  pub_.hold_message_id = pub_.interp_holding ? io.message_id : -1;
   pub_.recording = recording_;
   pub_.drives_enabled = all_axes_enabled();
   pub_.accel_clamps = accel_clamps_;

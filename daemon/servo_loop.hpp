@@ -83,6 +83,7 @@ enum class EventKind : std::uint8_t {
   kForceRecovered, // a valid sample again after a fallback (force control stays off until `force on`)
   kLimitsSwapped,
   kSpindleAtSpeed, // a feed move waited for the spindle: value = wait s, limit = actual rpm
+  kProgramPause,   // M0/M1/M6 reached: axis = message id (ProgramPlanner::message); waits for resume
   kStandstillTimeout,  // a stop's axes did not come to rest: axis, value = speed mm/s (NaN: no
                        // fresh feedback), limit = safety.standstill_timeout_s; quick stop now
 };
@@ -151,6 +152,9 @@ struct LoopStatus {
   std::uint64_t gains_cycle = 0;    // cycle at which the last gains swap took effect
   bool jogging = false;
   bool interp_holding = false;      // M0/M1/M6 hold in the program
+  int hold_line = 0;                // while interp_holding: the hold's source line,
+  int hold_tool = 0;                // the tool after it (M6: the tool to load),
+  int hold_message_id = -1;         // and its message (ProgramPlanner::message)
   bool recording = false;
   bool drives_enabled = false;     // every axis drive in operation enabled
   std::uint64_t accel_clamps = 0;

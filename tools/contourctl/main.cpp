@@ -277,6 +277,7 @@ int cmd_run(Client& c, const RunOptions& o, bool as_json) {
   double max_eps_um = 0.0;
   if (n_blocks == 0) n_blocks = lines.size();
   bool interrupted = false;
+  int paused_line = -1;  // the programmed pause already announced
   for (;;) {
     if (g_interrupted != 0) {
       interrupted = true;
@@ -285,6 +286,20 @@ int cmd_run(Client& c, const RunOptions& o, bool as_json) {
     const json st = c.call({{"cmd", "status"}});
     if (job_ended(st, job)) break;
     const std::string s = st.at("state").get<std::string>();
+    // A programmed pause (M0/M1, M6 tool change) is part of the program: say what it waits for
+    // and keep waiting; `contourctl resume` continues it.
+    if (st.contains("hold") && st["hold"].is_object()) {
+      const int pl = st["hold"].value("line", 0);
+      if (pl != paused_line && show) {
+        paused_line = pl;
+        std::string what = st["hold"].value("message", std::string());
+        if (what.empty()) what = "program stop (M0/M1)";
+        std::fprintf(stderr, "%srun: paused at line %d: %s (contourctl resume continues)\n",
+                     tty ? "\r\033[K" : "", pl, what.c_str());
+      }
+    } else {
+      paused_line = -1;
+    }
     if (std::chrono::steady_clock::now() > until)
       throw ErrorReply("timed out waiting for the program");
     max_eps_um = std::max(max_eps_um, st.value("contour_error_um", 0.0));
