@@ -98,6 +98,10 @@ void PathMeter::window() {
   while (w0_ > 0 && segs_[w0_ - 1].s1 >= sc - reach_) --w0_;
   w1_ = cursor_ + 1;
   while (w1_ < segs_.size() && segs_[w1_].s0 <= se + reach_) ++w1_;
+  // At least two segments on each side whatever their lengths: a long segment next to the
+  // cursor (a Z plunge or retract before a rapid) must not hide the one after it.
+  w0_ = std::min(w0_, cursor_ >= 2 ? cursor_ - 2 : std::size_t{0});
+  w1_ = std::max(w1_, std::min(segs_.size(), cursor_ + 3));
 }
 
 void PathMeter::add_sample(const Vector3d& p) {

@@ -24,7 +24,7 @@ def fmt(v):
 class Prog:
     def __init__(self, name, what):
         self.name = name
-        self.lines = [HEADER.format(name=name, what=what).rstrip("\n")]
+        self.lines = [HEADER.format(name=name, what=what.replace("(", "[").replace(")", "]")).rstrip("\n")]
         self.pos = (0.0, 0.0, 0.0)
         self.feed = None
 
