@@ -132,12 +132,26 @@ void PathMeter::add_sample(const Vector3d& p) {
     return;
   }
   // Cursor: nearest segment of the window to this sample.
+  // The cursor only moves forward: to the EARLIEST segment from the cursor on whose distance is
+  // within 1 um of the nearest one, so a later pass over the same place (stacked circles, a
+  // second lap, a full circle starting where the last one ended) never takes it early, and the
+  // segments behind it stay in the window for the error.
   std::size_t arg = cursor_;
-  const double dp = dist(p, &arg);
+  {
+    double dmin = 1e300;
+    for (std::size_t i = cursor_; i < w1_; ++i) dmin = std::min(dmin, distance_to_segment(p, segs_[i].seg));
+    for (std::size_t i = cursor_; i < w1_; ++i) {
+      if (distance_to_segment(p, segs_[i].seg) <= dmin + 1e-3) {
+        arg = i;
+        break;
+      }
+    }
+  }
   if (arg != cursor_) {
     cursor_ = arg;
     window();
   }
+  const double dp = dist(p, nullptr);
   if (!have_prev_) {
     prev_ = p;
     have_prev_ = true;
@@ -146,7 +160,7 @@ void PathMeter::add_sample(const Vector3d& p) {
       r_.max_path_error_mm = dp;
       r_.worst_sample = n;
       r_.worst_point_mm = p;
-      r_.worst_line = segs_[arg].line;
+      r_.worst_line = segs_[cursor_].line;
     }
     return;
   }
