@@ -57,9 +57,9 @@ double arc_bound(const PathSegment& s, const Vector3d& x0, const Vector3d& x1, d
 }
 }  // namespace
 
-PathMeter::PathMeter(double period_s, double reach_mm, int accel_avg_periods)
-    : T_(period_s), reach_(reach_mm), avg_(accel_avg_periods) {
-  if (!(period_s > 0.0) || !(reach_mm > 0.0) || accel_avg_periods < 1)
+PathMeter::PathMeter(double period_s, double reach_mm, int accel_avg_periods, double cursor_slack_mm)
+    : T_(period_s), reach_(reach_mm), slack_(cursor_slack_mm), avg_(accel_avg_periods) {
+  if (!(period_s > 0.0) || !(reach_mm > 0.0) || accel_avg_periods < 1 || !(cursor_slack_mm >= 0.0))
     throw std::invalid_argument("PathMeter: period, reach and averaging must be > 0");
 }
 
@@ -133,7 +133,7 @@ void PathMeter::add_sample(const Vector3d& p) {
   }
   // Cursor: nearest segment of the window to this sample.
   // The cursor only moves forward: to the EARLIEST segment from the cursor on whose distance is
-  // within 1 um of the nearest one, so a later pass over the same place (stacked circles, a
+  // within cursor_slack_mm of the nearest one, so a later pass over the same place (stacked circles, a
   // second lap, a full circle starting where the last one ended) never takes it early, and the
   // segments behind it stay in the window for the error.
   std::size_t arg = cursor_;
@@ -141,7 +141,7 @@ void PathMeter::add_sample(const Vector3d& p) {
     double dmin = 1e300;
     for (std::size_t i = cursor_; i < w1_; ++i) dmin = std::min(dmin, distance_to_segment(p, segs_[i].seg));
     for (std::size_t i = cursor_; i < w1_; ++i) {
-      if (distance_to_segment(p, segs_[i].seg) <= dmin + 1e-3) {
+      if (distance_to_segment(p, segs_[i].seg) <= dmin + slack_) {
         arg = i;
         break;
       }

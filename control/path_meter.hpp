@@ -45,8 +45,10 @@ struct PathMeterResult {
 
 class PathMeter {
  public:
-  // reach_mm > 0; period_s > 0; accel_avg_periods >= 1 (10 at 1 ms: a 10 ms average).
-  PathMeter(double period_s, double reach_mm, int accel_avg_periods = 10);
+  // reach_mm > 0; period_s > 0; accel_avg_periods >= 1 (10 at 1 ms: a 10 ms average);
+  // cursor_slack_mm >= 0: the cursor stays on the earliest segment within this of the nearest (set
+  // it to the tolerance being checked: a later pass crossing the current one cannot take it).
+  PathMeter(double period_s, double reach_mm, int accel_avg_periods = 10, double cursor_slack_mm = 1e-3);
 
   // Programmed segments, in order, ahead of the samples that run along them. Zero-length lines
   // are ignored. `vertex_check`: the segment's end counts as a vertex (false for the end of the
@@ -74,6 +76,7 @@ class PathMeter {
   void window();
 
   double T_, reach_;
+  double slack_ = 1e-3;
   int avg_;
   std::deque<Seg> segs_;
   std::size_t cursor_ = 0;   // index in segs_

@@ -149,7 +149,10 @@ Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstr
   ip.capacity = static_cast<std::size_t>(mc.icfg.queue_capacity);
   interp.configure(ip, setup.start_mm);
   const int tail = planner.fir_length() - 1;
-  control::PathMeter meter(period_s, reach_for(o, mc, setup, planner.fir_length()));
+  // The meter's cursor stays on the pass within the tolerance being checked (a later pass crossing
+  // it cannot take it early).
+  control::PathMeter meter(period_s, reach_for(o, mc, setup, planner.fir_length()), 10,
+                           std::max(1e-3, pp.default_tolerance_mm));
 
   Result r;
   std::deque<CornerAcc> corners;
@@ -301,7 +304,8 @@ int run_measure(const Options& o) {
   std::ifstream in(o.program);
   if (!in) throw std::runtime_error(o.program + ": cannot open");
   control::PathMeter meter(mc.period_s,
-                           reach_for(o, mc, setup, config::fir_taps(o.fir_ms, mc.period_s) + 1));
+                           reach_for(o, mc, setup, config::fir_taps(o.fir_ms, mc.period_s) + 1), 10,
+                           std::max(1e-3, o.tolerance_um.value_or(mc.icfg.tolerance_um) * 1e-3));
   std::vector<control::Block> blocks;
   std::string text;
   while (!parser.ended()) {
