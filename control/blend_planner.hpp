@@ -1,97 +1,51 @@
 #pragma once
-// Corner-blending planner (seed 004) with a guaranteed path tolerance. Non-RT: runs ahead of the RT
-// loop (planner thread / contour-sim), allocates, streams in bounded memory.
+// Corner-blending planner with a guaranteed path tolerance: the entry point the planner thread
+// (daemon/planner.cpp), contour-sim and the tests use. Non-RT: runs ahead of the RT loop,
+// allocates, streams in bounded memory.
 //
-// Input: Blocks from GcodeParser. Arcs become chords (sagitta <= arc_chord_fraction * tolerance),
-// zero-length moves are dropped, feeds are clamped to the axis velocity limits and to the axis
-// acceleration limits (|v_axis| <= a_max * t_A / 2: the FIR output's acceleration is the difference
-// of two command velocities over t_A). Each move gets N samples: ceil(L / (F T)) by default (never
-// faster than programmed), floor(L / (F T)) in the paper's convention (`floor_rounding`), with the
-// per-sample step scaled so the move ends exactly.
-// Output: PlannedSegments with their command start s_{k+1} = s_k + N_k + g_k; gap g in
-// [0, L-1] periods: g = 0 is G64 (full overlap t_o = t_A), g = L-1 is G61 (stop at the vertex).
-// overlap_cycles = L-1-g.
+// Input: Blocks from GcodeParser (lines, arcs as chords with sagitta <= arc_chord_fraction * tol,
+// dwell, holds, tool changes, spindle changes, end; a kind it does not know is an exact stop).
+// Output: PlannedSegments for control::Interpolator (fir_interpolator.hpp), in start order.
 //
-// Tolerance-limited blending (G64 P eps), three methods:
-//  - kPaper: the paper's two-block model (eqs 2-6: error of the sampled points against the LINES
-//    of the two adjacent blocks, max over the overlap) and its incremental search (eqs 13-27: when
-//    the overlap shrinks by one period only the points next to the previous maximum are
-//    re-evaluated). Reproduces the paper; does NOT bound the real path with 3+ blocks in motion or
-//    at reversals.
-//  - kTrue (default): the paper's result is only the first candidate; each candidate is verified
-//    on the TRUE path: every block still in motion is summed, the error is the distance to the
-//    programmed segments (not lines), evaluated on every chord between samples (max of the min of
-//    convex distance functions: endpoints + the crossing point of the two nearest segments), and
-//    every programmed vertex must lie within eps of the sampled polyline (two-sided). On failure the
-//    overlap shrinks one period at a time; on success it grows while it still passes.
-//    Causality: a candidate is verified assuming the machine stops after the new block; the next
-//    decision only changes samples after its own start, which it verifies again, so by induction
-//    the whole output path holds eps; g = L-1 always passes, so a schedule always exists.
-//  - kExhaustive: same verification, every overlap from full down to zero, first that passes
-//    (the per-corner optimum of the greedy schedule; the reference for the time comparison).
-// Arc chords: eps_verify = eps * (1 - arc_chord_fraction) so chord + blend error <= eps.
+// Methods (PlannerParams::method):
+//  - kTrue (default) / kPaper / kExhaustive: seed 004's one-feed-per-block overlap methods
+//    (overlap_planner.hpp): the true-path-verified overlap search, the paper's reproduction.
+//  - kLookahead (experimental): look-ahead velocity plan (lookahead_planner.hpp) — per-axis
+//    velocity and acceleration limits held by the planned command itself, corner speeds from the
+//    tolerance and the limits, the tolerance verified on the true output path before anything is
+//    handed on (samples, between samples, every programmed vertex).
+// G61 stops at every vertex, G64 blends as fast as the limits allow, G64 P<tol> holds tol.
 #include <Eigen/Core>
 #include <cstdint>
-#include <deque>
 #include <functional>
-#include <limits>
-#include <optional>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "control/fir_interpolator.hpp"
 #include "control/gcode.hpp"
+#include "control/lookahead_planner.hpp"
+#include "control/overlap_planner.hpp"
+#include "control/planner_types.hpp"
 
 namespace contour::control {
 
-enum class BlendMethod { kPaper, kTrue, kExhaustive };
-
-struct PlannerParams {
-  double period_s = 0.001;
-  int fir_taps = 101;   // t_A / T + 1
-  int fir2_taps = 0;    // 0 = one stage
-  bool floor_rounding = false;
-  BlendMethod method = BlendMethod::kTrue;
-  std::optional<BlendMode> force_mode;          // overrides the program's G61/G64
-  std::optional<double> force_tolerance_mm;     // overrides G64 P
-  double default_tolerance_mm = 0.05;           // chord budget for arcs in G61/G64
-  double arc_chord_fraction = 0.25;
-  Eigen::Vector3d max_velocity_mm_min = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-  Eigen::Vector3d max_accel_mm_s2 = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-};
-
-struct CornerReport {
-  std::int64_t move_index = 0;  // index of the move after the corner (0-based, after splitting)
-  int line = 0;                 // source line of the block after the corner
-  int prev_line = 0;            // source line of the block before (== line inside an arc)
-  Eigen::Vector3d vertex_mm = Eigen::Vector3d::Zero();
-  double angle_deg = 0.0;       // turning angle, 0 = straight on, 180 = reversal
-  int overlap_cycles = 0;
-  double model_error_mm = 0.0;  // the method's own error estimate at the chosen overlap
-  double tolerance_mm = 0.0;    // 0 when not tolerance-limited
-};
-
-struct PlannerStats {
-  std::int64_t moves = 0;
-  std::int64_t dropped_zero_length = 0;
-  std::int64_t verifications = 0;  // true-path candidate checks
-  std::size_t max_window = 0;      // largest number of moves held at once (bounded memory)
-};
-
 class BlendPlanner {
  public:
+  // Throws std::invalid_argument on bad parameters.
   BlendPlanner(const PlannerParams& p, const Eigen::Vector3d& start_mm);
 
-  // Feeds one parsed block; finished segments become available through pop().
+  // Feeds one parsed block; finished segments become available through pop(). Throws
+  // std::invalid_argument for a move that cannot be interpolated (naming its line).
   void push(const Block& b);
   bool pop(PlannedSegment& out);
-  [[nodiscard]] std::size_t ready() const { return out_.size(); }
-  [[nodiscard]] bool ended() const { return ended_; }
+  [[nodiscard]] std::size_t ready() const;
+  [[nodiscard]] bool ended() const;
 
-  void on_corner(std::function<void(const CornerReport&)> cb) { corner_cb_ = std::move(cb); }
-  [[nodiscard]] const std::vector<std::string>& messages() const { return messages_; }
-  [[nodiscard]] const PlannerStats& stats() const { return stats_; }
-  [[nodiscard]] int fir_length() const { return fir_.length(); }
+  void on_corner(std::function<void(const CornerReport&)> cb);
+  [[nodiscard]] const std::vector<std::string>& messages() const;
+  [[nodiscard]] const PlannerStats& stats() const;
+  [[nodiscard]] int fir_length() const { return overlap_.fir_length(); }
 
   // The paper's two-block model alone (exposed for tests): largest overlap (cycles) with
   // e_max <= eps for moves a -> b, each from rest; incremental (true) or exhaustive (false) search.
@@ -103,65 +57,12 @@ class BlendPlanner {
                            const Eigen::Vector3d& b1, std::int64_t na, std::int64_t nb, double eps,
                            bool incremental) const;
 
+  // The look-ahead planner's sharp-corner blend model (nullptr for the overlap methods).
+  [[nodiscard]] const LookaheadPlanner* lookahead() const { return lookahead_.get(); }
+
  private:
-  struct Move {
-    std::int64_t id = 0;
-    Eigen::Vector3d a, b;
-    double len = 0.0;
-    double feed_mm_min = 0.0;
-    std::int64_t n = 1;
-    std::int64_t s = 0;
-    int line = 0;
-    BlendMode mode = BlendMode::kFull;
-    double eps = 0.0;  // verification tolerance (chord budget removed)
-    double tol = 0.0;  // programmed tolerance
-    double path_start = 0.0;
-    const Block* src = nullptr;
-    SpindleDir spindle = SpindleDir::kOff;
-    double rpm = 0.0;
-    bool mist = false, flood = false;
-    int tool = 0;
-    [[nodiscard]] std::int64_t finish(std::int64_t tail) const { return s + n + tail; }
-  };
-  struct Vertex {
-    std::int64_t move_id;  // the move starting at this vertex
-    Eigen::Vector3d p;
-    double eps;
-    double fixed_best = std::numeric_limits<double>::infinity();
-    std::int64_t fixed_from = 0;
-  };
-
-  void add_move(const Block& b, const Eigen::Vector3d& a, const Eigen::Vector3d& e, double chord_err);
-  void decide(Move& m);
-  void barrier(SegmentKind kind, const std::string& msg, const Block& b, double extra_s);
-  void emit(const Move& m);
-  Eigen::Vector3d q(std::int64_t t) const;  // true path at plan time t from the window
-  double dist_path(const Eigen::Vector3d& x, int* arg) const;
-  double dist_seg(const Eigen::Vector3d& x, std::size_t i) const;
-  double chord_max(const Eigen::Vector3d& A, const Eigen::Vector3d& B) const;
-  // Checks gap g for the newest window move; returns the max error (mm) or +inf on failure.
-  double verify(std::int64_t g, double eps);
-  void extend_fixed(std::int64_t until);
-
-  PlannerParams p_;
-  FirFilter fir_;
-  std::int64_t tail_;  // L - 1
-  Eigen::Vector3d pos_;
-  double path_mm_ = 0.0;
-  std::int64_t next_id_ = 0;
-  std::deque<Move> win_;
-  std::deque<Vertex> vtx_;
-  std::deque<PlannedSegment> out_;
-  std::int64_t earliest_start_ = 0;  // after barriers
-  bool stop_before_next_ = true;
-  // Spindle state the last kSpindleSync marker waited for (feed moves after a change wait).
-  SpindleDir synced_spindle_ = SpindleDir::kOff;
-  double synced_rpm_ = 0.0;
-  std::vector<Eigen::Vector3d> chord_buf_;
-  std::vector<std::string> messages_;
-  std::function<void(const CornerReport&)> corner_cb_;
-  PlannerStats stats_;
-  bool ended_ = false;
+  OverlapPlanner overlap_;  // the overlap methods, and the paper's two-block model
+  std::unique_ptr<LookaheadPlanner> lookahead_;
 };
 
 }  // namespace contour::control

@@ -42,6 +42,24 @@ double FirFilter::progress(std::int64_t k, std::int64_t n) const noexcept {
   return sum;
 }
 
+double FirFilter::progress(double k, double n) const noexcept {
+  if (k <= 0.0) return 0.0;
+  const double last = static_cast<double>(length_ - 1);
+  if (k - last >= n) return n;
+  // Taps i <= k-n see the whole block (n), taps k-n < i < k see k-i, taps i >= k none. With real k
+  // and n the boundaries are floor(k - n) and ceil(k) - 1 (equal to k - n and k - 1 for integers).
+  const std::int64_t a = std::clamp<std::int64_t>(static_cast<std::int64_t>(std::floor(k - n)), -1,
+                                                  length_ - 1);
+  const std::int64_t b =
+      std::min<std::int64_t>(static_cast<std::int64_t>(std::ceil(k)) - 1, length_ - 1);
+  double sum = n * p_[static_cast<std::size_t>(a + 1)];
+  if (b >= a + 1) {
+    sum += k * (p_[static_cast<std::size_t>(b + 1)] - p_[static_cast<std::size_t>(a + 1)]) -
+           (pi_[static_cast<std::size_t>(b + 1)] - pi_[static_cast<std::size_t>(a + 1)]);
+  }
+  return sum;
+}
+
 void Interpolator::configure(const InterpolatorParams& p, const Eigen::Vector3d& start_mm) {
   if (p.capacity < 4) throw std::invalid_argument("interpolator capacity must be >= 4");
   if (!(p.override_max >= 0.0)) throw std::invalid_argument("override_max must be >= 0");
@@ -74,7 +92,9 @@ bool Interpolator::push(const PlannedSegment& seg) noexcept {
     for (std::size_t i = 0; i < count_; ++i) {
       const PlannedSegment& q = at(i);
       if (q.kind == SegmentKind::kMotion)
-        from = std::max(from, q.start_cycle + q.samples + fir_.length() - 1);
+        from = std::max(from, q.start_cycle + static_cast<std::int64_t>(std::ceil(
+                                                  q.start_offset_cycles + segment_duration(q))) +
+                                  fir_.length() - 1);
     }
     shift_ += from - s.start_cycle;
     s.start_cycle = from;
@@ -97,7 +117,13 @@ Eigen::Vector3d Interpolator::position_at(std::int64_t t, double* progress_mm,
     const PlannedSegment& s = at(i);
     if (s.kind != SegmentKind::kMotion) continue;
     if (s.start_cycle > t) break;
-    const double f = fir_.progress(t - s.start_cycle, s.samples) / static_cast<double>(s.samples);
+    double f = 0.0;
+    if (s.duration_cycles > 0.0) {
+      const double k = static_cast<double>(t - s.start_cycle) - s.start_offset_cycles;
+      f = fir_.progress(k, s.duration_cycles) / s.duration_cycles;
+    } else {
+      f = fir_.progress(t - s.start_cycle, s.samples) / static_cast<double>(s.samples);
+    }
     q += f * (s.end_mm - s.start_mm);
     prog += f * s.length_mm;
     ln = s.line;
@@ -112,7 +138,9 @@ void Interpolator::drop_finished(std::int64_t t) noexcept {
   while (count_ > 0) {
     const PlannedSegment& s = at(0);
     if (s.kind != SegmentKind::kMotion) break;
-    if (s.start_cycle + s.samples + tail > t) break;
+    if (static_cast<double>(s.start_cycle + tail) + s.start_offset_cycles + segment_duration(s) >
+        static_cast<double>(t))
+      break;
     base_mm_ = s.end_mm;
     base_progress_mm_ = s.path_start_mm + s.length_mm;
     last_line_ = s.line;
@@ -166,7 +194,8 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
       limit = static_cast<double>(s.start_cycle);
       break;
     }
-    limit = std::max(limit, static_cast<double>(s.start_cycle + s.samples + tail));
+    limit = std::max(limit, std::ceil(static_cast<double>(s.start_cycle + tail) +
+                                      s.start_offset_cycles + segment_duration(s)));
   }
   const double next = std::min(tau_ + ovr_, std::max(limit, tau_));
   tau_ = next;

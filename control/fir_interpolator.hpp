@@ -6,12 +6,17 @@
 // block b's filtered output has stopped.
 //
 // Time base: "plan time" t counts interpolation periods; q(t) is the reference point after t
-// periods. A segment with command start s and N samples contributes delta * P(t - s) / N, where
-// P(k) = sum_i w_i clamp(k - i, 0, N) (FirFilter::progress, O(1) from prefix sums). It has stopped
-// at t = s + N + L - 1 (L = filter length in taps).
+// periods. A segment with command start s and duration N periods contributes delta * P(t - s) / N,
+// where P(k) = sum_i w_i clamp(k - i, 0, N) (FirFilter::progress, O(1) from prefix sums). It has
+// stopped at t = s + N + L - 1 (L = filter length in taps). s and N may be fractional (the
+// look-ahead planner times short segments exactly instead of rounding each to whole periods): the
+// command position is then the piecewise-linear ramp sampled at whole periods, and the same closed
+// form holds with real boundaries (seed 004's integer blocks are the special case).
 //
-// Interpolator: the RT consumer. step() is noexcept, allocation-free, O(blocks in motion <= L);
-// the segment ring is sized at configure(). Feed override (0..max) scales the plan-time advance
+// Interpolator: the RT consumer. step() is noexcept, allocation-free, O(segments in motion); the
+// planner keeps every segment at least PlannerParams::min_segment_cycles long, so at most
+// (L - 1) / min_segment_cycles + 2 segments are in motion at once; the segment ring is sized at
+// configure(). Feed override (0..max) scales the plan-time advance
 // per cycle (path unchanged: between plan samples the point moves on the straight chord between
 // consecutive plan samples, which is the path the planner verified); the override is rate-limited
 // so its change is spread over at least t_A. It starts at 100 %; while it is not 100 % the output
@@ -33,6 +38,10 @@ class FirFilter {
   [[nodiscard]] int length() const noexcept { return length_; }  // total taps L
   // Filtered command progress in samples (0..n) after k command periods of an n-sample block.
   [[nodiscard]] double progress(std::int64_t k, std::int64_t n) const noexcept;
+  // Same for a fractional start offset and duration: k = t - s (real), n > 0 (real). Equal to
+  // the integer form (bit for bit) when k and n are whole numbers.
+  [[nodiscard]] double progress(double k, double n) const noexcept;
+  [[nodiscard]] double weight(int i) const noexcept { return w_[static_cast<std::size_t>(i)]; }
 
  private:
   int length_ = 1;
@@ -46,18 +55,24 @@ class FirFilter {
 // speed (LinuxCNC's spindle.N.at-speed before a feed move).
 enum class SegmentKind : std::uint8_t { kMotion, kHold, kOptionalHold, kEnd, kSpindleSync };
 
-// One planned micro-block (a line or an arc chord) with its command start time. Produced by
-// BlendPlanner (non-RT), consumed by Interpolator (RT). Trivially copyable.
+// One planned micro-block (a line, an arc chord or a part of one at one command speed) with its
+// command start time. Produced by BlendPlanner (non-RT), consumed by Interpolator (RT).
+// Command start = start_cycle + start_offset_cycles, duration = duration_cycles when > 0, else
+// samples (the seed-004 planners use whole periods: offset 0, duration 0).
 struct PlannedSegment {
   SegmentKind kind = SegmentKind::kMotion;
-  std::int64_t start_cycle = 0;  // s: first command period
-  std::int64_t samples = 0;      // N >= 1 for motion
+  std::int64_t start_cycle = 0;  // s: first command period (integer part of the start)
+  std::int64_t samples = 0;      // N >= 1 for motion: periods touched, ceil(offset + duration)
+  double start_offset_cycles = 0.0;  // fractional part of the command start, [0, 1)
+  double duration_cycles = 0.0;      // exact command duration (periods); 0 = `samples`
   Eigen::Vector3d start_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d end_mm = Eigen::Vector3d::Zero();
   double length_mm = 0.0;
   double path_start_mm = 0.0;  // programmed arc length at the segment start
   double feed_mm_min = 0.0;    // programmed (after axis-limit clamping)
+  double speed_mm_min = 0.0;   // planned command speed of this segment (0: feed_mm_min)
   int line = 0;                // source line
+  bool rapid = false;          // G0 (and G28/G30/G53 rapids): a rapid override may apply
   SpindleDir spindle = SpindleDir::kOff;
   double spindle_rpm = 0.0;
   bool mist = false;
@@ -98,6 +113,11 @@ struct InterpolatorParams {
   bool optional_stop = false;  // M1 holds when true
   std::size_t capacity = 4096;  // segment ring size (> blocks in motion at once)
 };
+
+// Command duration and the plan time at which a motion segment has stopped (output at its end).
+[[nodiscard]] inline double segment_duration(const PlannedSegment& s) noexcept {
+  return s.duration_cycles > 0.0 ? s.duration_cycles : static_cast<double>(s.samples);
+}
 
 class Interpolator {
  public:

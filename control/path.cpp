@@ -108,7 +108,10 @@ double distance_to_segment(const Eigen::Vector3d& p, const PathSegment& s) noexc
     if (rel <= sweep) best = std::min(best, std::hypot(rho - r, dn));
     return best;
   }
-  // Helix: f(u) = |p - h(u)|^2 over the swept angle; scan then Newton.
+  // Helix: g(phi) = |p - h(phi)|^2 / 2 over the swept angle. Near the helix (rho >= r / 2) every
+  // local minimum lies within half a turn of a point with p's own in-plane angle (the radial term
+  // dominates): Newton from each such candidate (one per turn) and the two ends. Near the axis
+  // the radial term is flat: a scan of the whole sweep first (64 samples per turn).
   auto pos = [&](double phi) {
     Eigen::Vector3d q;
     const double a = a0 + sign * phi;
@@ -117,6 +120,40 @@ double distance_to_segment(const Eigen::Vector3d& p, const PathSegment& s) noexc
     q[ax.n] = s.start[ax.n] + h * phi / sweep;
     return q;
   };
+  const double kz = h / sweep;
+  auto newton = [&](double phi) {
+    for (int it = 0; it < 30; ++it) {
+      const double a = a0 + sign * phi;
+      Eigen::Vector3d d1, d2;
+      d1[ax.a] = -sign * r * std::sin(a);
+      d1[ax.b] = sign * r * std::cos(a);
+      d1[ax.n] = kz;
+      d2[ax.a] = -r * std::cos(a);
+      d2[ax.b] = -r * std::sin(a);
+      d2[ax.n] = 0.0;
+      const Eigen::Vector3d e = p - pos(phi);
+      const double g1 = -e.dot(d1);
+      const double g2 = d1.squaredNorm() - e.dot(d2);
+      if (g2 <= 0.0) break;
+      const double next = std::clamp(phi - g1 / g2, 0.0, sweep);
+      if (std::abs(next - phi) < 1e-14) break;
+      phi = next;
+    }
+    return (p - pos(phi)).norm();
+  };
+  const double rho = std::hypot(p[ax.a] - s.center[ax.a], p[ax.b] - s.center[ax.b]);
+  if (rho >= 0.5 * r) {
+    double rel = sign * (std::atan2(p[ax.b] - s.center[ax.b], p[ax.a] - s.center[ax.a]) - a0);
+    rel = std::fmod(rel, kTwoPi);
+    if (rel < 0.0) rel += kTwoPi;
+    for (double phi = rel - kTwoPi; phi <= sweep + kTwoPi; phi += kTwoPi) {
+      if (phi < -0.5 * kTwoPi || phi > sweep + 0.5 * kTwoPi) continue;
+      best = std::min(best, newton(std::clamp(phi, 0.0, sweep)));
+    }
+    best = std::min(best, newton(0.0));
+    best = std::min(best, newton(sweep));
+    return best;
+  }
   const int n = std::max(16, static_cast<int>(std::ceil(sweep / kTwoPi * 64.0)));
   double best_phi = 0.0;
   double best_d = best;
@@ -128,27 +165,7 @@ double distance_to_segment(const Eigen::Vector3d& p, const PathSegment& s) noexc
       best_phi = phi;
     }
   }
-  // Newton on g(phi) = 0.5 |p - h(phi)|^2; dg = -(p-h).h', d2g = |h'|^2 - (p-h).h''.
-  const double kz = h / sweep;
-  double phi = best_phi;
-  for (int it = 0; it < 20; ++it) {
-    const double a = a0 + sign * phi;
-    Eigen::Vector3d d1, d2;
-    d1[ax.a] = -sign * r * std::sin(a);
-    d1[ax.b] = sign * r * std::cos(a);
-    d1[ax.n] = kz;
-    d2[ax.a] = -r * std::cos(a);
-    d2[ax.b] = -r * std::sin(a);
-    d2[ax.n] = 0.0;
-    const Eigen::Vector3d e = p - pos(phi);
-    const double g1 = -e.dot(d1);
-    const double g2 = d1.squaredNorm() - e.dot(d2);
-    if (g2 <= 0.0) break;
-    const double next = std::clamp(phi - g1 / g2, 0.0, sweep);
-    if (std::abs(next - phi) < 1e-14) break;
-    phi = next;
-  }
-  return std::min(best_d, (p - pos(phi)).norm());
+  return std::min(best_d, newton(best_phi));
 }
 
 double distance_to_path(const Eigen::Vector3d& p, std::span<const PathSegment> path) noexcept {

@@ -9,8 +9,9 @@
 // (G2/G3 P-word minus one, and full circles where start == end).
 //
 // distance_to_segment(p, s): Euclidean distance from p to the closest point of s, in mm.
-//   Lines and planar arcs: closed form (exact to rounding). Helical arcs: coarse scan of the swept
-//   angle (64 samples per turn) refined by Newton on the squared distance; accurate to ~1e-9 mm.
+//   Lines and planar arcs: closed form (exact to rounding). Helical arcs: Newton on the squared
+//   distance from one start per turn at the point's own in-plane angle and from both ends
+//   (points within r/2 of the axis: a scan of 64 samples per turn first); ~1e-9 mm.
 //   Pure, noexcept, no allocation: callable from the RT thread.
 // distance_to_path(p, segments): minimum over a span of segments (the contour-error metric of
 //   issue 4: "exact point-to-polyline/arc distance for G-code").

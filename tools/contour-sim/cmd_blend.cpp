@@ -1,5 +1,7 @@
-// contour-sim blend: G-code -> blend planner -> FIR interpolator, with the true path error measured
-// independently of the planner (seed 004 reproduction + the guaranteed tolerance of issue 3).
+// contour-sim blend: G-code -> blend planner -> FIR interpolator, with the true path error, the
+// vertex error and the axis accelerations measured independently of the planner
+// (control/path_meter.hpp: the same meter measures a trajectory from elsewhere with --measure,
+// e.g. LinuxCNC's commanded position in tools/bench/tp_compare.sh).
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -9,8 +11,9 @@
 #include <deque>
 #include <fstream>
 #include <iostream>
-#include <map>
+#include <limits>
 #include <optional>
+#include <sstream>
 #include <string>
 
 #include "config/config.hpp"
@@ -20,6 +23,7 @@
 #include "control/fir_interpolator.hpp"
 #include "control/gcode.hpp"
 #include "control/path.hpp"
+#include "control/path_meter.hpp"
 #include "tools/contour-sim/commands.hpp"
 
 namespace contour::sim {
@@ -41,14 +45,10 @@ struct Options {
   bool compare = false;
   double period_ms = 1.0;
   double override_percent = 100.0;
-  std::string csv, plot, config;
+  std::string csv, plot, config, measure;
   std::size_t max_corners = 2000;
-};
-
-struct Geo {
-  control::PathSegment seg;
-  int line;
-  double s0 = 1e300, s1 = -1e300;  // planner progress range (chord lengths)
+  double reach_mm = 0.0;
+  double lookahead_mm = 0.0;
 };
 
 struct CornerAcc {
@@ -57,80 +57,80 @@ struct CornerAcc {
 };
 
 struct Result {
-  double duration_s = 0.0;
-  double max_path_error_mm = 0.0;
-  double max_vertex_error_mm = 0.0;
+  double duration_s = 0.0;   // plan time until the end (interpolator done)
+  control::PathMeterResult m;
+  bool nan = false;
   double max_feed_mm_min = 0.0;
   double max_programmed_feed_mm_min = 0.0;
   double plan_s = 0.0;
-  std::int64_t moves = 0, cycles = 0, verifications = 0;
-  std::size_t max_window = 0;
+  std::int64_t moves = 0, cycles = 0, verifications = 0, segments = 0;
+  control::PlannerStats stats;
   std::size_t holds = 0;
   nlohmann::json corners = nlohmann::json::array();
   std::size_t corner_count = 0;
-  double tolerance_mm = 0.0;
-  bool limited = false;
 };
 
-// Max distance from the chord [a, b] to the programmed segments: ends, the crossing of the two
-// nearest segments (see BlendPlanner::chord_max) and 8 interior points (arcs are not convex sets).
-double chord_error(const Vector3d& a, const Vector3d& b, const std::deque<Geo>& geo) {
-  auto dist = [&](const Vector3d& x, std::size_t* arg) {
-    double best = 1e300;
-    for (std::size_t i = 0; i < geo.size(); ++i) {
-      const double d = control::distance_to_segment(x, geo[i].seg);
-      if (d < best) {
-        best = d;
-        if (arg) *arg = i;
-      }
+struct Machine {
+  config::InterpolatorConfig icfg;
+  config::ProgramConfig pcfg;
+  double period_s = 1e-3;
+  Vector3d vmax = Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Vector3d amax = Vector3d::Constant(std::numeric_limits<double>::infinity());
+};
+
+Machine load_machine(const Options& o) {
+  Machine m;
+  m.period_s = o.period_ms * 1e-3;
+  if (!o.config.empty()) {
+    const auto cfg = config::load_config_file(o.config);
+    m.icfg = cfg.interpolator;
+    m.pcfg = cfg.program;
+    m.period_s = cfg.machine.period_s;
+    for (std::size_t i = 0; i < cfg.machine.axes.size() && i < 3; ++i) {
+      m.vmax[static_cast<int>(i)] = cfg.machine.axes[i].max_velocity_mm_min;
+      m.amax[static_cast<int>(i)] = cfg.machine.axes[i].max_accel_mm_s2;
     }
-    return best;
-  };
-  std::size_t ia = 0, ib = 0;
-  double worst = std::max(dist(a, &ia), dist(b, &ib));
-  if ((b - a).norm() < 1e-12) return worst;
-  for (int k = 1; k < 8; ++k) worst = std::max(worst, dist(a + (b - a) * (k / 8.0), nullptr));
-  if (ia != ib) {
-    double lo = 0.0, hi = 1.0;
-    for (int it = 0; it < 40; ++it) {
-      const double mid = 0.5 * (lo + hi);
-      const Vector3d x = a + mid * (b - a);
-      if (control::distance_to_segment(x, geo[ia].seg) <= control::distance_to_segment(x, geo[ib].seg)) lo = mid; else hi = mid;
-    }
-    worst = std::max(worst, dist(a + 0.5 * (lo + hi) * (b - a), nullptr));
   }
-  return worst;
+  return m;
+}
+
+// Path length the meter looks around its cursor: the path the FIR's window spans at the highest
+// speed (how far a blend can cut across), at least 2 mm.
+double reach_for(const Options& o, const Machine& mc, const control::ProgramSetup& setup, int taps) {
+  if (o.reach_mm > 0.0) return o.reach_mm;
+  double v = std::min(setup.rapid_mm_min, mc.vmax.maxCoeff());
+  if (!std::isfinite(v)) v = setup.rapid_mm_min;
+  return std::max(2.0, v / 60.0 * taps * mc.period_s);
+}
+
+nlohmann::json corner_json(const CornerAcc& c, double period_s) {
+  return {{"block", c.r.line},
+          {"prev_block", c.r.prev_line},
+          {"angle_deg", c.r.angle_deg},
+          {"overlap_ms", c.r.overlap_cycles * period_s * 1e3},
+          {"corner_speed_mm_min", c.r.corner_speed_mm_min},
+          {"max_error_um", c.max_err_mm * 1e3},
+          {"model_error_um", c.r.model_error_mm * 1e3},
+          {"vertex", {c.r.vertex_mm.x(), c.r.vertex_mm.y(), c.r.vertex_mm.z()}}};
 }
 
 Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstream* csv,
            std::vector<Vector3d>* path_out, std::vector<Vector3d>* vertices_out) {
-  config::InterpolatorConfig icfg;
-  config::ProgramConfig pcfg;
-  double period_s = o.period_ms * 1e-3;
-  Vector3d vmax = Vector3d::Constant(std::numeric_limits<double>::infinity());
-  Vector3d amax = vmax;
-  if (!o.config.empty()) {
-    const auto cfg = config::load_config_file(o.config);
-    icfg = cfg.interpolator;
-    pcfg = cfg.program;
-    period_s = cfg.machine.period_s;
-    for (std::size_t i = 0; i < cfg.machine.axes.size() && i < 3; ++i) {
-      vmax[static_cast<int>(i)] = cfg.machine.axes[i].max_velocity_mm_min;
-      amax[static_cast<int>(i)] = cfg.machine.axes[i].max_accel_mm_s2;
-    }
-  }
-  control::ProgramSetup setup = config::to_program_setup(pcfg, icfg);
+  const Machine mc = load_machine(o);
+  control::ProgramSetup setup = config::to_program_setup(mc.pcfg, mc.icfg);
+  const double period_s = mc.period_s;
   control::PlannerParams pp;
   pp.period_s = period_s;
-  pp.fir_taps = config::fir_taps(o.fir_ms, period_s);
-  if (pp.fir_taps < 1) pp.fir_taps = 1;
+  pp.fir_taps = std::max(1, config::fir_taps(o.fir_ms, period_s));
   pp.fir2_taps = config::fir_taps(o.fir2_ms, period_s);
   pp.floor_rounding = floor_rounding;
   pp.method = method;
-  pp.arc_chord_fraction = icfg.arc_chord_fraction;
-  pp.default_tolerance_mm = icfg.tolerance_um * 1e-3;
-  pp.max_velocity_mm_min = vmax;
-  pp.max_accel_mm_s2 = amax;
+  pp.arc_chord_fraction = mc.icfg.arc_chord_fraction;
+  pp.default_tolerance_mm = mc.icfg.tolerance_um * 1e-3;
+  pp.max_velocity_mm_min = mc.vmax;
+  pp.max_accel_mm_s2 = mc.amax;
+  pp.rapid_mm_min = setup.rapid_mm_min;
+  pp.lookahead_mm = o.lookahead_mm;
   if (!o.mode.empty()) pp.force_mode = config::parse_blend_mode(o.mode);
   if (o.tolerance_um) {
     pp.force_tolerance_mm = *o.tolerance_um * 1e-3;
@@ -145,20 +145,17 @@ Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstr
   ip.fir_taps = pp.fir_taps;
   ip.fir2_taps = pp.fir2_taps;
   ip.period_s = period_s;
-  ip.override_max = icfg.feed_override_max_percent / 100.0;
-  ip.capacity = static_cast<std::size_t>(icfg.queue_capacity);
+  ip.override_max = mc.icfg.feed_override_max_percent / 100.0;
+  ip.capacity = static_cast<std::size_t>(mc.icfg.queue_capacity);
   interp.configure(ip, setup.start_mm);
   const int tail = planner.fir_length() - 1;
+  // The meter's cursor stays on the pass within the tolerance being checked (a later pass crossing
+  // it cannot take it early).
+  control::PathMeter meter(period_s, reach_for(o, mc, setup, planner.fir_length()), 10,
+                           std::max(1e-3, pp.default_tolerance_mm));
 
   Result r;
-  std::deque<Geo> geo;
   std::deque<CornerAcc> corners;
-  struct Vtx {
-    Vector3d p;
-    double s;  // progress at the vertex
-    double best = 1e300;
-  };
-  std::deque<Vtx> vtx;
   planner.on_corner([&](const control::CornerReport& c) { corners.push_back({c, 0.0}); });
 
   std::vector<control::Block> blocks;
@@ -174,14 +171,8 @@ Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstr
       while (interp.free_slots() > 0 && planner.pop(seg)) {
         interp.push(seg);
         last_start = std::max(last_start, seg.start_cycle);
-        if (seg.kind == control::SegmentKind::kMotion) {
-          for (auto& g : geo)
-            if (g.line == seg.line) {
-              g.s0 = std::min(g.s0, seg.path_start_mm);
-              g.s1 = std::max(g.s1, seg.path_start_mm + seg.length_mm);
-            }
+        if (seg.kind == control::SegmentKind::kMotion)
           max_feed_seen = std::max(max_feed_seen, seg.feed_mm_min);
-        }
       }
       if (interp.free_slots() == 0 || planner.ended()) break;
       if (last_start > static_cast<std::int64_t>(tau) + 3 * tail + 10 && planner.ready() == 0) break;
@@ -191,9 +182,10 @@ Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstr
         parser.parse_line(text, blocks);
       }
       for (const auto& b : blocks) {
-        if (b.kind == control::BlockKind::kMotion && (b.seg.end - b.seg.start).norm() > 1e-9) {
-          geo.push_back({b.seg, b.line});
-          if (vertices_out) vertices_out->push_back(b.seg.end);
+        if (b.kind == control::BlockKind::kMotion) {
+          meter.add_segment(b.seg, b.line);
+          if (vertices_out && control::segment_length_mm(b.seg) > 1e-9)
+            vertices_out->push_back(b.seg.end);
         }
         planner.push(b);
       }
@@ -202,12 +194,18 @@ Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstr
     plan_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
 
-  const double margin = 1.0;
   Vector3d prev = setup.start_mm;
   if (path_out) path_out->push_back(prev);
+  meter.add_sample(prev);
   control::InterpOutput out;
   std::int64_t cycles = 0;
   const double ovr = o.override_percent / 100.0;
+  const double reach = reach_for(o, mc, setup, planner.fir_length());
+  auto retire = [&](const CornerAcc& c) {
+    if (c.r.line == c.r.prev_line && c.r.angle_deg < 1e-9) return;
+    ++r.corner_count;
+    if (r.corners.size() < o.max_corners) r.corners.push_back(corner_json(c, period_s));
+  };
   while (true) {
     refill();
     const auto st = interp.step(ovr, out);
@@ -223,32 +221,10 @@ Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstr
       continue;
     }
     const Vector3d p = out.position_mm;
-    // Geometry window around the current progress.
-    const double s = out.path_progress_mm;
-    const double reach = margin + 2.0 * max_feed_seen / 60.0 * (tail + 1) * period_s;
-    while (geo.size() > 1 && geo.front().s1 < s - reach) geo.pop_front();
-    std::deque<Geo> near;
-    for (const auto& g : geo) {
-      if (g.s0 > s + reach && g.s0 < 1e299) break;
-      if (g.s0 > 1e299) continue;
-      near.push_back(g);
-    }
-    if (near.empty()) near = geo;
-    const double e_pt = near.empty() ? 0.0 : chord_error(prev, p, near);
-    r.max_path_error_mm = std::max(r.max_path_error_mm, e_pt);
+    if (!p.allFinite()) r.nan = true;
+    meter.add_sample(p);
+    const double e_pt = meter.last_error_mm();
     r.max_feed_mm_min = std::max(r.max_feed_mm_min, (p - prev).norm() / period_s * 60.0);
-    // Vertices: every programmed block end except the last, two-sided check.
-    for (const auto& g : near) {
-      if (g.s1 < -1e299) continue;
-      bool known = false;
-      for (const auto& v : vtx) if ((v.p - g.seg.end).norm() < 1e-12 && std::abs(v.s - g.s1) < 1e-9) known = true;
-      if (!known && g.s1 > -1e299) vtx.push_back({g.seg.end, g.s1});
-    }
-    for (auto& v : vtx) v.best = std::min(v.best, control::distance_point_segment(v.p, prev, p));
-    while (!vtx.empty() && vtx.front().s < s - reach) {
-      r.max_vertex_error_mm = std::max(r.max_vertex_error_mm, vtx.front().best);
-      vtx.pop_front();
-    }
     // Corner attribution: nearest pending corner vertex.
     if (!corners.empty()) {
       CornerAcc* best = nullptr;
@@ -262,52 +238,105 @@ Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstr
         }
       }
       if (best && bd < reach) best->max_err_mm = std::max(best->max_err_mm, e_pt);
-      // Retire the oldest corner once a newer one is nearer and it is out of reach (bounded).
       while (corners.size() > 1 &&
              (((corners.front().r.vertex_mm - p).norm() > reach &&
                (corners[1].r.vertex_mm - p).norm() < (corners.front().r.vertex_mm - p).norm()) ||
               corners.size() > 256)) {
-        auto& c = corners.front();
-        if (c.r.line != c.r.prev_line) {
-          ++r.corner_count;
-          if (r.corners.size() < o.max_corners)
-            r.corners.push_back({{"block", c.r.line}, {"prev_block", c.r.prev_line}, {"angle_deg", c.r.angle_deg},
-                                 {"overlap_ms", c.r.overlap_cycles * period_s * 1e3}, {"max_error_um", c.max_err_mm * 1e3},
-                                 {"model_error_um", c.r.model_error_mm * 1e3}, {"vertex", {c.r.vertex_mm.x(), c.r.vertex_mm.y(), c.r.vertex_mm.z()}}});
-        }
+        retire(corners.front());
         corners.pop_front();
       }
     }
-    if (csv) *csv << static_cast<double>(cycles) * period_s << ',' << p.x() << ',' << p.y() << ',' << p.z() << ',' << s << ',' << out.line << ',' << e_pt * 1e3 << '\n';
+    if (csv) {
+      *csv << static_cast<double>(cycles) * period_s << ',' << p.x() << ',' << p.y() << ','
+           << p.z() << ',' << out.path_progress_mm << ',' << out.line << ',' << e_pt * 1e3 << '\n';
+    }
     if (path_out) path_out->push_back(p);
     prev = p;
     if (st == control::InterpStatus::kDone) break;
     if (st == control::InterpStatus::kStarved && planner.ended() && planner.ready() == 0) break;
   }
-  // Remaining vertices (the final point is exact; its distance is 0).
-  for (const auto& v : vtx) r.max_vertex_error_mm = std::max(r.max_vertex_error_mm, v.best);
-  for (auto& c : corners) {
-    if (c.r.line == c.r.prev_line) continue;
-    ++r.corner_count;
-    if (r.corners.size() < o.max_corners)
-      r.corners.push_back({{"block", c.r.line}, {"prev_block", c.r.prev_line}, {"angle_deg", c.r.angle_deg},
-                           {"overlap_ms", c.r.overlap_cycles * period_s * 1e3}, {"max_error_um", c.max_err_mm * 1e3},
-                           {"model_error_um", c.r.model_error_mm * 1e3}, {"vertex", {c.r.vertex_mm.x(), c.r.vertex_mm.y(), c.r.vertex_mm.z()}}});
-  }
+  meter.finish();
+  for (auto& c : corners) retire(c);
+  r.m = meter.result();
   r.cycles = cycles;
   r.duration_s = out.plan_time_cycles * period_s;
   r.plan_s = plan_s;
-  r.moves = planner.stats().moves;
-  r.verifications = planner.stats().verifications;
-  r.max_window = planner.stats().max_window;
+  r.stats = planner.stats();
+  r.moves = r.stats.moves;
+  r.verifications = r.stats.verifications;
   r.max_programmed_feed_mm_min = max_feed_seen;
   return r;
 }
 
+nlohmann::json meter_json(const control::PathMeterResult& m) {
+  auto v3 = [](const Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
+  return {{"motion_s", m.duration_s},
+          {"max_path_error_um", m.max_path_error_mm * 1e3},
+          {"max_vertex_error_um", m.max_vertex_error_mm * 1e3},
+          {"vertices_checked", m.vertices},
+          {"worst_point", v3(m.worst_point_mm)},
+          {"worst_line", m.worst_line},
+          {"worst_sample", m.worst_sample},
+          {"worst_vertex", v3(m.worst_vertex_mm)},
+          {"worst_vertex_line", m.worst_vertex_line},
+          {"peak_accel_10ms_mm_s2", v3(m.peak_accel_mm_s2)},
+          {"peak_accel_mm_s2", v3(m.peak_accel_raw_mm_s2)},
+          {"peak_speed_mm_min", m.peak_speed_mm_s * 60.0},
+          {"path_length_mm", m.length_mm}};
+}
+
 nlohmann::json summary(const Result& r) {
-  return {{"duration_s", r.duration_s}, {"max_path_error_um", r.max_path_error_mm * 1e3},
-          {"max_vertex_error_um", r.max_vertex_error_mm * 1e3}, {"max_feed_mm_min_reached", r.max_feed_mm_min},
-          {"planning_s", r.plan_s}, {"moves", r.moves}};
+  nlohmann::json j = meter_json(r.m);
+  j["duration_s"] = r.duration_s;
+  j["max_feed_mm_min_reached"] = r.max_feed_mm_min;
+  j["planning_s"] = r.plan_s;
+  j["moves"] = r.moves;
+  j["nan"] = r.nan;
+  return j;
+}
+
+// --measure: a trajectory from elsewhere, one sample per period ("x y z ..." or "x,y,z,...";
+// lines that do not start with a number are skipped), against the program's path.
+int run_measure(const Options& o) {
+  const Machine mc = load_machine(o);
+  control::ProgramSetup setup = config::to_program_setup(mc.pcfg, mc.icfg);
+  control::GcodeParser parser(setup, o.program);
+  std::ifstream in(o.program);
+  if (!in) throw std::runtime_error(o.program + ": cannot open");
+  control::PathMeter meter(mc.period_s,
+                           reach_for(o, mc, setup, config::fir_taps(o.fir_ms, mc.period_s) + 1), 10,
+                           std::max(1e-3, o.tolerance_um.value_or(mc.icfg.tolerance_um) * 1e-3));
+  std::vector<control::Block> blocks;
+  std::string text;
+  while (!parser.ended()) {
+    if (std::getline(in, text)) {
+      parser.parse_line(text, blocks);
+    } else {
+      parser.finish(blocks);
+    }
+    for (const auto& b : blocks)
+      if (b.kind == control::BlockKind::kMotion) meter.add_segment(b.seg, b.line);
+    blocks.clear();
+  }
+  std::ifstream tr(o.measure);
+  if (!tr) throw std::runtime_error(o.measure + ": cannot open");
+  bool nan = false;
+  while (std::getline(tr, text)) {
+    for (char& ch : text)
+      if (ch == ',' || ch == '\t') ch = ' ';
+    std::istringstream ls(text);
+    double x = 0, y = 0, z = 0;
+    if (!(ls >> x >> y >> z)) continue;
+    const Vector3d p(x, y, z);
+    if (!p.allFinite()) nan = true;
+    meter.add_sample(p);
+  }
+  meter.finish();
+  nlohmann::json j = meter_json(meter.result());
+  j["nan"] = nan;
+  j["samples"] = meter.result().samples;
+  std::cout << j.dump() << std::endl;
+  return 0;
 }
 
 }  // namespace
@@ -321,8 +350,10 @@ int run_blend(int argc, char** argv) {
   app.add_option("--fir2-ms", o.fir2_ms, "second FIR stage (jerk limit), ms; 0 = off");
   app.add_option("--mode", o.mode, "g61 | g64 | limited (overrides the program); default: as programmed")
       ->check(CLI::IsMember({"g61", "g64", "limited"}));
-  app.add_option("--method", o.method, "limited-blend search: true | exhaustive | paper")
-      ->check(CLI::IsMember({"true", "exhaustive", "paper"}));
+  app.add_option("--method", o.method,
+                 "blend planner: true (seed 004 overlap per corner, verified on the true path) | "
+                 "lookahead (experimental look-ahead velocity plan, verified) | exhaustive | paper")
+      ->check(CLI::IsMember({"true", "lookahead", "exhaustive", "paper"}));
   app.add_flag("--paper", o.paper, "the paper's own method and conventions (two-block incremental search, floor-rounded sample counts)");
   app.add_option("--rounding", o.rounding, "block sample counts: ceil | floor")->check(CLI::IsMember({"ceil", "floor"}));
   app.add_flag("--compare", o.compare, "also run the paper's method and the exhaustive search; report both");
@@ -332,15 +363,30 @@ int run_blend(int argc, char** argv) {
   app.add_option("--csv", o.csv, "write t_s,x,y,z,progress_mm,line,error_um per cycle");
   app.add_option("--plot", o.plot, "PNG of programmed vs interpolated path (gnuplot)");
   app.add_option("--max-corners", o.max_corners, "corners listed in the JSON");
+  app.add_option("--measure", o.measure,
+                 "measure this trajectory (one 'x y z ...' row per period, e.g. LinuxCNC's "
+                 "commanded position) against the program instead of planning it");
+  app.add_option("--reach-mm", o.reach_mm, "path length the meter searches around its cursor (0: auto)");
+  app.add_option("--lookahead-mm", o.lookahead_mm, "look-ahead planner: path held ahead (0: auto)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : 2;
   }
+  if (!o.measure.empty()) {
+    try {
+      return run_measure(o);
+    } catch (const std::exception& e) {
+      std::cerr << "contour-sim blend: " << e.what() << '\n';
+      std::cout << nlohmann::json{{"error", e.what()}}.dump() << std::endl;
+      return 2;
+    }
+  }
   const BlendMethod method = o.paper ? BlendMethod::kPaper
                              : o.method == "paper" ? BlendMethod::kPaper
-                             : o.method == "exhaustive" ? BlendMethod::kExhaustive : BlendMethod::kTrue;
+                             : o.method == "exhaustive" ? BlendMethod::kExhaustive
+                             : o.method == "lookahead" ? BlendMethod::kLookahead : BlendMethod::kTrue;
   const bool floor_rounding = o.rounding.empty() ? method == BlendMethod::kPaper : o.rounding == "floor";
   nlohmann::json j;
   try {
@@ -356,14 +402,30 @@ int run_blend(int argc, char** argv) {
     j = summary(r);
     j["corners"] = r.corners;
     j["corner_count"] = r.corner_count;
-    j["method"] = method == BlendMethod::kPaper ? "paper" : (method == BlendMethod::kExhaustive ? "exhaustive" : "true");
+    j["method"] = method == BlendMethod::kPaper ? "paper"
+                  : method == BlendMethod::kExhaustive ? "exhaustive"
+                  : method == BlendMethod::kLookahead ? "lookahead" : "true";
     j["rounding"] = floor_rounding ? "floor" : "ceil";
     j["fir_taps"] = config::fir_taps(o.fir_ms, o.period_ms * 1e-3);
     j["verifications"] = r.verifications;
-    j["max_window_moves"] = r.max_window;
+    j["max_window_moves"] = r.stats.max_window;
+    j["segments"] = r.stats.segments;
+    j["plans"] = r.stats.plans;
+    j["tolerance_repairs"] = r.stats.tolerance_repairs;
+    j["accel_repairs"] = r.stats.accel_repairs;
+    j["fallbacks"] = r.stats.fallbacks;
     j["holds_resumed"] = r.holds;
     j["max_programmed_feed_mm_min"] = r.max_programmed_feed_mm_min;
-    if (r.plan_s > 0) j["planning_moves_per_s"] = static_cast<double>(r.moves) / r.plan_s;
+    if (r.plan_s > 0) {
+      j["planning_moves_per_s"] = static_cast<double>(r.moves) / r.plan_s;
+      j["planning_realtime_factor"] = r.duration_s / r.plan_s;
+    }
+    // Axis limits (from --config): the raw per-period acceleration of the output must hold them.
+    const Machine mc = load_machine(o);
+    bool accel_ok = true;
+    for (int i = 0; i < 3; ++i)
+      if (std::isfinite(mc.amax[i]) && r.m.peak_accel_raw_mm_s2[i] > mc.amax[i] * (1.0 + 1e-6)) accel_ok = false;
+    j["accel_within_limits"] = accel_ok;
     if (o.compare) {
       const Result rp = run(o, BlendMethod::kPaper, true, nullptr, nullptr, nullptr);
       const Result re = run(o, BlendMethod::kExhaustive, floor_rounding, nullptr, nullptr, nullptr);
@@ -396,8 +458,11 @@ int run_blend(int argc, char** argv) {
       std::remove(vdat.c_str());
     }
     std::cout << j.dump() << std::endl;
+    if (r.nan) return 1;
+    if ((method == BlendMethod::kTrue || method == BlendMethod::kLookahead) && !accel_ok) return 1;
     if (method != BlendMethod::kPaper && (o.mode == "limited" || o.mode.empty()) && o.tolerance_um &&
-        (r.max_path_error_mm > *o.tolerance_um * 1e-3 + 1e-9 || r.max_vertex_error_mm > *o.tolerance_um * 1e-3 + 1e-9))
+        (r.m.max_path_error_mm > *o.tolerance_um * 1e-3 + 1e-9 ||
+         r.m.max_vertex_error_mm > *o.tolerance_um * 1e-3 + 1e-9))
       return 1;
     return 0;
   } catch (const std::exception& e) {

@@ -1,0 +1,1049 @@
+#include "control/lookahead_planner.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <set>
+#include <stdexcept>
+
+#include "control/path.hpp"
+
+namespace contour::control {
+
+namespace {
+using Eigen::Vector3d;
+constexpr double kTiny = 1e-12;  // mm: positions closer than this are the same
+constexpr int kFine = 4;          // fine braking steps per window
+
+// Upper bound of max over [0,1] of min(d_a, d_b) on a chord, given both convex distance
+// functions at its two ends (each is below its chord interpolation).
+double chord_bound(double a0, double a1, double b0, double b1) {
+  double m = std::max(std::min(a0, b0), std::min(a1, b1));
+  const double da = a1 - a0, db = b1 - b0;
+  const double den = da - db;
+  if (std::abs(den) > 1e-300) {
+    const double lam = (b0 - a0) / den;
+    if (lam > 0.0 && lam < 1.0) m = std::max(m, a0 + lam * da);
+  }
+  return m;
+}
+}  // namespace
+
+LookaheadPlanner::LookaheadPlanner(const PlannerParams& p, const Vector3d& start_mm)
+    : p_(p), pos_(start_mm) {
+  if (!(p.period_s > 0.0)) throw std::invalid_argument("planner period must be > 0");
+  if (!(p.arc_chord_fraction > 0.0 && p.arc_chord_fraction < 1.0))
+    throw std::invalid_argument("arc_chord_fraction must be in (0, 1)");
+  if (!(p.min_segment_cycles > 0.0)) throw std::invalid_argument("min_segment_cycles must be > 0");
+  fir_.configure(p.fir_taps, p.fir2_taps);
+  L_ = fir_.length();
+  L1_ = std::max(1, p.fir_taps);
+  T_ = p.period_s;
+  for (int i = 0; i < 3; ++i) {
+    const double a = p.max_accel_mm_s2[i];
+    if (!(a > 0.0)) throw std::invalid_argument("axis acceleration limits must be > 0");
+    if (!(p.max_velocity_mm_min[i] > 0.0))
+      throw std::invalid_argument("axis velocity limits must be > 0");
+    // Planned strictly inside the limit: rounding never lands a period on the wrong side.
+    A_[i] = std::isfinite(a) ? a * T_ * T_ * L1_ * (1.0 - 1e-9) : kInf;
+    vmax_[i] = p.max_velocity_mm_min[i] / 60.0 * T_;
+  }
+  rr_ = static_cast<double>(L_ + 1);
+  delta_ = static_cast<double>(L1_ + 1) / kFine;
+  // Filter moments (periods) and the sharp-corner displacement alpha(g): at the middle of the
+  // overlap t* = (L - 1 + g) / 2 the output is vertex + v alpha (u2 - u1) (symmetric filter).
+  double mean = 0.0, m2 = 0.0;
+  for (int i = 0; i < L_; ++i) {
+    mean += fir_.weight(i) * i;
+    m2 += fir_.weight(i) * i * i;
+  }
+  sigma2_ = std::max(0.0, m2 - mean * mean);
+  alpha_.assign(static_cast<std::size_t>(L_), 0.0);
+  for (int g = 0; g < L_; ++g) {
+    const double ts = 0.5 * (L_ - 1 + g);
+    double a = 0.0;
+    for (int i = 0; i < L_; ++i)
+      if (i > ts) a += fir_.weight(i) * (i - ts);
+    alpha_[static_cast<std::size_t>(g)] = a;
+  }
+  committed_.hist.ring.assign(static_cast<std::size_t>(L1_ + 3), Vector3d::Zero());
+  committed_.tau = 0.0;
+  committed_.chord = 0;
+  vcommitted_.t = 0;
+  vcommitted_.y = start_mm;
+}
+
+double LookaheadPlanner::corner_model_mm(double theta, double v, int gap) const {
+  const int g = std::clamp(gap, 0, L_ - 1);
+  const double s = std::sin(0.5 * theta);
+  return v * (2.0 * alpha_[static_cast<std::size_t>(g)] * s + s / (4.0 * std::max(1, L_ - g)));
+}
+
+bool LookaheadPlanner::pop(PlannedSegment& out) {
+  if (out_.empty()) return false;
+  out = out_.front();
+  out_.pop_front();
+  return true;
+}
+
+// ------------------------------------------------------------------------------------------------
+// Input
+
+void LookaheadPlanner::push(const Block& b) {
+  if (ended_) return;
+  switch (b.kind) {
+    case BlockKind::kMotion: {
+      // A feed move after a spindle start or speed change waits, at an exact stop, until the
+      // spindle is at speed (rapids do not cut: they run while the spindle accelerates).
+      if (!b.rapid && b.spindle != SpindleDir::kOff &&
+          (b.spindle != synced_spindle_ || b.spindle_rpm != synced_rpm_)) {
+        barrier(SegmentKind::kSpindleSync, "", b, 0.0);
+        synced_spindle_ = b.spindle;
+        synced_rpm_ = b.spindle_rpm;
+      }
+      if (b.spindle == SpindleDir::kOff) synced_spindle_ = SpindleDir::kOff;
+      const BlendMode mode = p_.force_mode.value_or(b.blend);
+      double tol = p_.force_tolerance_mm.value_or(mode == BlendMode::kLimited ? b.tolerance_mm
+                                                                               : p_.default_tolerance_mm);
+      if (mode == BlendMode::kLimited && b.tolerance_mm <= 0.0 && !p_.force_tolerance_mm)
+        tol = p_.default_tolerance_mm;
+      if (b.seg.kind == PathSegment::Kind::kLine) {
+        add_chord(b, pos_, b.seg.end, 0.0);
+      } else {
+        const double chord_err = p_.arc_chord_fraction * tol;
+        chord_buf_.clear();
+        chord_points(b.seg, chord_err, chord_buf_);
+        Vector3d a = pos_;
+        for (const auto& e : chord_buf_) {
+          add_chord(b, a, e, chord_err);
+          a = e;
+        }
+      }
+      pos_ = b.seg.end;
+      maybe_plan();
+      break;
+    }
+    case BlockKind::kDwell:
+      barrier(SegmentKind::kMotion, "", b, b.dwell_s);
+      break;
+    case BlockKind::kProgramStop:
+    case BlockKind::kToolChange:
+      barrier(SegmentKind::kHold, b.message, b, 0.0);
+      break;
+    case BlockKind::kOptionalStop:
+      barrier(SegmentKind::kOptionalHold, b.message, b, 0.0);
+      break;
+    case BlockKind::kEnd:
+      barrier(SegmentKind::kEnd, "", b, 0.0);
+      ended_ = true;
+      break;
+    default:  // a kind this planner does not know: exact stop, nothing else
+      barrier(SegmentKind::kMotion, "", b, 0.0);
+      break;
+  }
+}
+
+void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector3d& e,
+                                 double chord_err) {
+  const Vector3d d = e - a;
+  const double len = d.norm();
+  if (len < 1e-9) {
+    ++stats_.dropped_zero_length;
+    return;
+  }
+  Chord c;
+  c.id = next_id_++;
+  c.a = a;
+  c.b = e;
+  c.u = d / len;
+  c.len = len;
+  c.s0 = path_mm_;
+  c.line = b.line;
+  c.rapid = b.rapid;
+  c.mode = p_.force_mode.value_or(b.blend);
+  c.tol = p_.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
+                                                              : p_.default_tolerance_mm);
+  // G64 without P blends without a tolerance; G61 stops at every vertex (nothing to verify).
+  c.eps = c.mode == BlendMode::kLimited ? c.tol - chord_err : kInf;
+  c.spindle = b.spindle;
+  c.rpm = b.spindle_rpm;
+  c.mist = b.mist;
+  c.flood = b.flood;
+  c.tool = b.tool;
+  double f = b.feed_mm_min;
+  if (b.rapid) f = std::min(f, p_.rapid_mm_min);
+  for (int i = 0; i < 3; ++i) {
+    const double ui = std::abs(c.u[i]);
+    if (ui > 1e-12) f = std::min(f, p_.max_velocity_mm_min[i] / ui);
+  }
+  if (!(f > 0.0)) f = 1e-6;
+  c.feed_mm_min = f;
+  const double v = f / 60.0 * T_;
+  // A move of more than ~31 years at its feed is not a real program (e.g. Y1e65 or a vanishing
+  // feed); refuse it before times overflow (fuzz regression-1).
+  if (!(len / v < 1e12)) {
+    throw std::invalid_argument("line " + std::to_string(b.line) + ": move of " +
+                                std::to_string(len) + " mm at " + std::to_string(f) +
+                                " mm/min is too long to interpolate");
+  }
+  c.cap = std::min(v, len / p_.min_segment_cycles);
+  c.dv = kInf;
+  for (int i = 0; i < 3; ++i) {
+    const double ui = std::abs(c.u[i]);
+    if (ui > 1e-12) c.dv = std::min(c.dv, A_[i] / ui);
+  }
+  if (!chords_.empty() && !start_from_rest_) {
+    const Chord& pr = chords_.back();
+    const double cth = std::clamp(pr.u.dot(c.u), -1.0, 1.0);
+    c.turn = std::acos(cth);
+    if (pr.mode == BlendMode::kExactStop || force_stop_next_) c.stop = true;
+  }
+  start_from_rest_ = false;
+  force_stop_next_ = false;
+  vmax_seen_ = std::max(vmax_seen_, c.cap);
+  dvmin_seen_ = std::min(dvmin_seen_, c.dv);
+  dvmax_seen_ = std::max(dvmax_seen_, c.dv);
+  path_mm_ += len;
+  ++stats_.moves;
+  chords_.push_back(c);
+  stats_.max_window = std::max(stats_.max_window, chords_.size());
+}
+
+// ------------------------------------------------------------------------------------------------
+// Planning
+
+double LookaheadPlanner::lookahead_mm() const {
+  const double vmax = vmax_seen_, dvmin = dvmin_seen_, dvmax = dvmax_seen_;
+  const double aq = dvmin * kFine / ((kFine + 1.0) * (L1_ + 1.0));
+  double brake = std::isfinite(aq) ? vmax * vmax / (2.0 * aq) : 0.0;
+  brake += 2.0 * rr_ * vmax;
+  if (p_.lookahead_mm > 0.0) brake = p_.lookahead_mm;
+  const double margin = std::min(dvmax, vmax) * (L_ + 1.0) + vmax * rr_;
+  return brake + margin;
+}
+
+void LookaheadPlanner::maybe_plan() {
+  if (chords_.empty()) return;
+  const double s_c = committed_.chord < next_id_ && committed_.chord >= chords_.front().id
+                         ? chord(committed_.chord).s0 + committed_.x
+                         : path_mm_;
+  const double ahead = path_mm_ - s_c;
+  const std::int64_t n_ahead = next_id_ - committed_.chord;
+  if (ahead >= 2.0 * lookahead_mm() ||
+      n_ahead >= static_cast<std::int64_t>(p_.max_lookahead_chords))
+    plan(false);
+}
+
+void LookaheadPlanner::decide(std::int64_t id, bool final) {
+  Chord& c = chord(id);
+  if (c.decided) return;
+  c.C = kInf;
+  c.C_acc = kInf;
+  c.gap = 0;
+  c.r = 0.0;
+  c.model_e = 0.0;
+  if (c.stop) {
+    c.C = 0.0;
+    c.gap = L_ - 1;
+    c.decided = true;
+    return;
+  }
+  if (id == chords_.front().id || c.turn < 1e-9) {
+    c.decided = true;
+    return;
+  }
+  const Chord& pr = chord(id - 1);
+  const double dv0 = std::min(pr.dv, c.dv);
+  const double q0 = std::isfinite(dv0) ? dv0 / (kFine + 1.0) : 0.0;  // slowest non-stop cap
+  const double p = c.s0;
+  const double v0 = std::min({pr.cap, pr.repair_cap, c.cap, c.repair_cap});
+  // Neighbourhood within the largest half-span (v0 * rr / 2 on each side): per-axis direction
+  // ranges and the turning of the other vertices, by distance from this vertex.
+  const double span_max = 0.5 * v0 * rr_;
+  std::vector<Nb>& nb = nb_;
+  nb.clear();
+  for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
+    const Chord& q = chord(k);
+    const double d = p - (q.s0 + q.len);  // distance from the vertex to q's end
+    if (k < id - 1 && d > span_max) break;
+    nb.push_back({std::max(0.0, d), k < id - 1 ? chord(k + 1).turn : 0.0, q.u, false});
+  }
+  for (std::int64_t k = id; k < next_id_; ++k) {
+    const Chord& q = chord(k);
+    const double d = q.s0 - p;
+    if (k > id && d > span_max) break;
+    nb.push_back({d, k > id ? q.turn : 0.0, q.u, true});
+  }
+  (void)final;
+  // Per-axis acceleration cap at speed v: velocity change across the vertex within +-v rr / 2.
+  auto acc_cap = [&](double v) {
+    const double s = 0.5 * v * rr_;
+    Vector3d mn_b = Vector3d::Constant(kInf), mx_b = Vector3d::Constant(-kInf);
+    Vector3d mn_a = mn_b, mx_a = mx_b;
+    for (const auto& n : nb) {
+      if (n.d > s && !(n.d == 0.0)) continue;
+      if (n.after) {
+        mn_a = mn_a.cwiseMin(n.u);
+        mx_a = mx_a.cwiseMax(n.u);
+      } else {
+        mn_b = mn_b.cwiseMin(n.u);
+        mx_b = mx_b.cwiseMax(n.u);
+      }
+    }
+    double cap = kInf;
+    for (int i = 0; i < 3; ++i) {
+      const double du = std::max(mx_a[i] - mn_b[i], mx_b[i] - mn_a[i]);
+      if (du > 1e-12) cap = std::min(cap, A_[i] / du);
+    }
+    return cap;
+  };
+  // The largest constant speed the window rule allows through the neighbourhood (the span, and
+  // so the direction change, shrinks with the speed: two fixed-point steps from above).
+  double cacc = acc_cap(v0);
+  if (cacc < v0) {
+    const double v1 = cacc;
+    const double c1 = acc_cap(v1);
+    double v = c1 >= v1 ? std::min(c1, v0) : v1;
+    if (acc_cap(v) < v) v = v1;
+    cacc = v;
+  }
+  c.C_acc = cacc;
+  const double vhi = std::min(v0, acc_margin_ * (std::isfinite(cacc) ? cacc : kInf));
+  // Tolerance model: e(v, g) = v (ks(g) + turn_others(v) sigma^2 / (2 rr)).
+  const BlendMode mode = pr.mode;
+  double eps = std::min(pr.eps, c.eps) * c.f;
+  if (mode == BlendMode::kFull) eps = kInf;
+  const double st = std::sin(0.5 * c.turn);
+  auto ks = [&](int g) {
+    return 2.0 * alpha_[static_cast<std::size_t>(g)] * st + st / (4.0 * std::max(1, L_ - g));
+  };
+  auto others = [&](double vv) {
+    const double s = 0.5 * vv * rr_;
+    double t = 0.0;
+    for (const auto& n : nb)
+      if (n.d <= s) t += n.turn;
+    return t;
+  };
+  auto err = [&](double vv, int g) { return vv * (ks(g) + others(vv) * sigma2_ / (2.0 * rr_)); };
+  // Largest speed <= vtop with err <= eps (err is increasing in v).
+  auto speed_for = [&](double vtop, int g) {
+    if (!std::isfinite(eps) || err(vtop, g) <= eps) return vtop;
+    double lo = 0.0, hi = vtop;
+    for (int it = 0; it < 40; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      if (err(mid, g) <= eps) lo = mid; else hi = mid;
+    }
+    return lo;
+  };
+  const double aq = dv0 * kFine / ((kFine + 1.0) * (L1_ + 1.0));
+  auto cost = [&](double cc, int g) {
+    double pen = 2.0 * rr_ * (1.0 - cc / v0);
+    if (std::isfinite(aq) && aq > 0.0) pen += (v0 - cc) * (v0 - cc) / (aq * v0);
+    return g + pen;
+  };
+  double best_c = 0.0, best_cost = kInf;
+  int best_g = L_ - 1;
+  // Stop at the vertex: always possible.
+  {
+    const double cs = (L_ - 1) + (std::isfinite(aq) && aq > 0.0 ? v0 / aq : 0.0);
+    best_cost = cs;
+  }
+  // Speed only (g = 0) and with a rest (the overlap reduction of seed 004) at speeds up to what
+  // a rest allows (the command drops to zero at the vertex: v |u_i| <= A_i on both sides).
+  const double c_speed = speed_for(vhi, 0);
+  if (c_speed > q0 && cost(c_speed, 0) < best_cost) {
+    best_c = c_speed;
+    best_g = 0;
+    best_cost = cost(c_speed, 0);
+  }
+  if (std::isfinite(eps)) {
+    const double c_rest = std::min(vhi, dv0 * (1.0 - 1e-9));
+    for (int k = 0; k <= 4; ++k) {
+      const double cc = c_speed + (c_rest - c_speed) * k / 4.0;
+      if (!(cc > q0) || cc < c_speed) continue;
+      int g = 0;
+      while (g < L_ - 1 && err(cc, g) > eps) ++g;
+      if (err(cc, g) > eps) continue;
+      if (cost(cc, g) < best_cost) {
+        best_cost = cost(cc, g);
+        best_c = cc;
+        best_g = g;
+      }
+    }
+  }
+  if (best_c <= 0.0) {
+    c.C = 0.0;
+    c.gap = L_ - 1;
+    c.stop = true;
+  } else {
+    c.C = best_c;
+    c.gap = best_g;
+    c.r = best_c * rr_;
+    c.model_e = err(best_c, best_g);
+  }
+  c.decided = true;
+}
+
+void LookaheadPlanner::build_pieces(double s_from, double s_stop, bool final) {
+  (void)final;
+  pieces_.clear();
+  struct Ev {
+    double pos;
+    bool start;
+    double cap, cacc;
+  };
+  thread_local std::vector<Ev> ev;
+  ev.clear();
+  for (const auto& c : chords_) {
+    if (!c.decided || c.stop || !std::isfinite(c.C)) continue;
+    const double lo = c.s0 - c.r, hi = c.s0 + c.r;
+    if (hi <= s_from || lo >= s_stop) continue;
+    ev.push_back({lo, true, c.C, c.C_acc});
+    ev.push_back({hi, false, c.C, c.C_acc});
+  }
+  std::sort(ev.begin(), ev.end(), [](const Ev& x, const Ev& y) { return x.pos < y.pos; });
+  std::multiset<double> caps, caccs;
+  std::size_t ei = 0;
+  auto apply_to = [&](double x) {
+    while (ei < ev.size() && ev[ei].pos <= x + kTiny) {
+      if (ev[ei].start) {
+        caps.insert(ev[ei].cap);
+        caccs.insert(ev[ei].cacc);
+      } else {
+        caps.erase(caps.find(ev[ei].cap));
+        caccs.erase(caccs.find(ev[ei].cacc));
+      }
+      ++ei;
+    }
+  };
+  for (std::int64_t k = committed_.chord; k < next_id_; ++k) {
+    const Chord& c = chord(k);
+    double x0 = std::max(s_from, c.s0);
+    const double x1 = std::min(s_stop, c.s0 + c.len);
+    if (x1 <= x0 + kTiny) {
+      if (c.s0 >= s_stop) break;
+      continue;
+    }
+    while (x0 < x1 - kTiny) {
+      apply_to(x0);
+      double nx = x1;
+      if (ei < ev.size() && ev[ei].pos < x1 - kTiny) nx = std::max(ev[ei].pos, x0 + kTiny);
+      Piece pc;
+      pc.s0 = x0;
+      pc.s1 = nx;
+      pc.chord = k;
+      pc.cap = std::min(c.cap, c.repair_cap);
+      if (!caps.empty()) pc.cap = std::min(pc.cap, *caps.begin());
+      if (!caccs.empty()) pc.cacc = *caccs.begin();
+      pieces_.push_back(pc);
+      x0 = nx;
+    }
+  }
+}
+
+void LookaheadPlanner::backward_pass(bool final) {
+  (void)final;
+  const double wd = L1_ + 1.0;
+  auto aq_of = [&](double dv) { return dv * kFine / ((kFine + 1.0) * wd); };
+  if (pieces_.empty()) return;
+  const Chord& last = chord(pieces_.back().chord);
+  const double q0e = last.dv / (kFine + 1.0);
+  double qnext = q0e * q0e;
+  for (std::size_t k = pieces_.size(); k-- > 0;) {
+    Piece& pc = pieces_[k];
+    const Chord& c = chord(pc.chord);
+    double qe = qnext;
+    // A stop or a rest at the vertex at this piece's end.
+    if (k + 1 < pieces_.size() && pieces_[k + 1].chord != pc.chord) {
+      const Chord& nx = chord(pieces_[k + 1].chord);
+      if (nx.stop) {
+        const double q0 = std::min(c.dv, nx.dv) / (kFine + 1.0);
+        qe = std::min(qe, q0 * q0);
+      }
+    }
+    pc.qe = qe;
+    const double len = pc.s1 - pc.s0;
+    const double a_line = aq_of(c.dv);
+    double vhi2 = pc.cap * pc.cap;
+    if (std::isfinite(a_line)) vhi2 = std::min(vhi2, qe + 2.0 * a_line * len);
+    double dv = c.dv;
+    if (std::isfinite(pc.cacc)) dv *= std::max(0.0, 1.0 - std::sqrt(vhi2) / pc.cacc);
+    pc.aq = aq_of(dv);
+    double qs = pc.cap * pc.cap;
+    if (std::isfinite(pc.aq)) qs = std::min(qs, qe + 2.0 * pc.aq * len);
+    qnext = qs;
+  }
+}
+
+double LookaheadPlanner::q_at(double s, std::size_t from) const {
+  double q = kInf;
+  for (std::size_t k = from; k < pieces_.size(); ++k) {
+    const Piece& pc = pieces_[k];
+    if (s < pc.s1) {
+      double v = pc.cap * pc.cap;
+      if (std::isfinite(pc.aq)) v = std::min(v, pc.qe + 2.0 * pc.aq * (pc.s1 - std::max(s, pc.s0)));
+      return std::min(q, v);
+    }
+    q = std::min(q, pc.qe);
+  }
+  return pieces_.empty() ? 0.0 : std::min(q, pieces_.back().qe);
+}
+
+void LookaheadPlanner::window_interval(const History& h, const Vector3d& u, double& lo,
+                                       double& hi) const {
+  lo = 0.0;
+  hi = kInf;
+  const std::size_t H = h.ring.size();
+  Vector3d mn = h.w_prev, mx = h.w_prev;
+  for (std::int64_t n = h.newest + 1 - L1_; n <= h.newest; ++n) {
+    const auto idx = static_cast<std::size_t>(((n % static_cast<std::int64_t>(H)) +
+                                               static_cast<std::int64_t>(H)) %
+                                              static_cast<std::int64_t>(H));
+    mn = mn.cwiseMin(h.ring[idx]);
+    mx = mx.cwiseMax(h.ring[idx]);
+  }
+  for (int i = 0; i < 3; ++i) {
+    if (!std::isfinite(A_[i])) continue;
+    const double ui = u[i];
+    if (std::abs(ui) < 1e-12) {
+      if (mx[i] > A_[i] || mn[i] < -A_[i]) lo = kInf;
+      continue;
+    }
+    const double up = mn[i] + A_[i], dn = mx[i] - A_[i];  // dn <= v ui <= up
+    if (ui > 0) {
+      hi = std::min(hi, up / ui);
+      lo = std::max(lo, dn / ui);
+    } else {
+      hi = std::min(hi, dn / ui);
+      lo = std::max(lo, up / ui);
+    }
+  }
+}
+
+void LookaheadPlanner::append(State& st, const Pulse& p) const {
+  History& h = st.hist;
+  const Vector3d w = p.v > 0.0 ? Vector3d(chord(p.chord).u * p.v) : Vector3d::Zero();
+  const double t0 = p.t0, t1 = p.t0 + p.dur;
+  const auto H = static_cast<std::int64_t>(h.ring.size());
+  const std::int64_t n_first = h.newest + 1;
+  const auto n_done = static_cast<std::int64_t>(std::floor(t1));
+  auto slot = [&](std::int64_t n) -> Vector3d& {
+    return h.ring[static_cast<std::size_t>(((n % H) + H) % H)];
+  };
+  if (n_done >= n_first) {
+    for (std::int64_t n = std::max(n_first, n_done - H + 1); n <= n_done; ++n) {
+      const double ov = std::min(static_cast<double>(n), t1) - std::max(static_cast<double>(n - 1), t0);
+      slot(n) = (n == n_first ? h.partial : Vector3d::Zero()) + w * std::max(0.0, ov);
+    }
+    h.newest = n_done;
+    h.partial = w * (t1 - static_cast<double>(n_done));
+  } else {
+    h.partial += w * (t1 - t0);
+  }
+  h.w_prev = w;
+  st.tau = t1;
+  if (p.v > 0.0) {
+    st.chord = p.chord;
+    st.x = p.x1;
+    const Chord& c = chord(p.chord);
+    if (st.x >= c.len - kTiny) {
+      st.chord = p.chord + 1;
+      st.x = 0.0;
+      st.rest_done = false;
+    }
+  }
+}
+
+bool LookaheadPlanner::forward(const State& start, double s_stop, double s_commit, Failure& fail) {
+  State st = start;
+  pulses_.clear();
+  bool snapped = false;
+  std::size_t pi = 0;
+  auto pos_of = [&](const State& s) {
+    return s.chord < next_id_ ? chord(s.chord).s0 + s.x : path_mm_;
+  };
+  auto rest_ok = [&](const History& h) {
+    double lo = 0.0, hi = 0.0;
+    window_interval(h, Vector3d::Zero(), lo, hi);
+    return !(lo > 0.0);
+  };
+  while (true) {
+    const double pos = pos_of(st);
+    if (!snapped && pos >= s_commit - kTiny) {
+      st_commit_ = st;
+      commit_pulses_ = pulses_.size();
+      snapped = true;
+    }
+    if (pos >= s_stop - kTiny || st.chord >= next_id_) break;
+    const Chord& c = chord(st.chord);
+    if (st.x <= kTiny && !st.rest_done) {
+      st.rest_done = true;
+      const int rest = c.stop ? L_ - 1 : (c.decided ? c.gap : 0);
+      if (rest > 0) {
+        if (!rest_ok(st.hist)) {
+          fail.kind = Failure::Kind::kWindow;
+          fail.chord = st.chord - 1;
+          fail.cap = st.hist.w_prev.norm();
+          return false;
+        }
+        Pulse r;
+        r.t0 = st.tau;
+        r.dur = rest;
+        r.chord = st.chord;
+        append(st, r);
+        pulses_.push_back(r);
+        continue;
+      }
+    }
+    while (pi + 1 < pieces_.size() && pieces_[pi].s1 <= pos + kTiny) ++pi;
+    if (pieces_.empty() || pieces_[pi].s1 <= pos + kTiny) break;
+    const Piece& pc = pieces_[pi];
+    double lo = 0.0, hi = kInf;
+    window_interval(st.hist, c.u, lo, hi);
+    double v = std::min(pc.cap, hi);
+    // Braking profile: the speed must be one the look-ahead can still brake from at the end of
+    // a fine step (the largest fixed point of v = sqrt(Q(pos + v delta)), from above).
+    double vb = v;
+    for (int it = 0; it < 6; ++it) {
+      const double q = std::sqrt(std::max(0.0, q_at(pos + vb * delta_, pi)));
+      if (q >= vb) break;
+      vb = q;
+    }
+    const bool braking = vb < v;
+    v = std::min(v, vb);
+    if (!(v > 0.0) || v < lo * (1.0 - 1e-9)) {
+      fail.kind = Failure::Kind::kWindow;
+      fail.chord = st.chord;
+      fail.cap = std::max(0.0, std::min(pc.cap, hi));
+      return false;
+    }
+    double e = 0.0;
+    if (braking || hi < pc.cap) {
+      e = pos + v * delta_;
+    } else {
+      // Cruise at the cap: until the braking profile falls below v.
+      // Q(e) >= v^2 at the pulse end; Q within the piece already holds everything after it.
+      e = pc.s1;
+      if (pc.qe < v * v && std::isfinite(pc.aq)) {
+        const double x = pc.aq > 0.0 ? pc.s1 - (v * v - pc.qe) / (2.0 * pc.aq) : pc.s0;
+        e = std::min(e, std::max(x, pc.s0));
+      }
+      if (e < pos + 0.25 * v * delta_) e = pos + v * delta_;
+    }
+    e = std::min(e, pc.s1);
+    if (pc.s1 - e < 0.25 * v * delta_) e = pc.s1;
+    if (e > s_stop) e = s_stop;
+    Pulse pl;
+    pl.t0 = st.tau;
+    pl.chord = c.id;
+    pl.x0 = st.x;
+    pl.x1 = (e >= c.s0 + c.len - kTiny) ? c.len : e - c.s0;
+    pl.v = v;
+    pl.dur = (pl.x1 - pl.x0) / v;
+    if (!(pl.dur > 0.0)) {
+      // Nothing left of this piece (rounding): step to the next piece.
+      st.x = pl.x1;
+      if (st.x >= c.len - kTiny) {
+        st.chord = c.id + 1;
+        st.x = 0.0;
+        st.rest_done = false;
+      }
+      continue;
+    }
+    append(st, pl);
+    pulses_.push_back(pl);
+  }
+  // The plan ends at rest: the drop to zero must satisfy the window rule too.
+  if (!pulses_.empty() && !rest_ok(st.hist)) {
+    fail.kind = Failure::Kind::kWindow;
+    fail.chord = pulses_.back().chord;
+    fail.cap = pulses_.back().v;
+    return false;
+  }
+  st_end_ = st;
+  if (!snapped) {
+    st_commit_ = st;
+    commit_pulses_ = pulses_.size();
+  }
+  return true;
+}
+
+bool LookaheadPlanner::verify(const VerifyState& vs0, std::int64_t t_commit, VerifyState& at_commit,
+                              VerifyState& at_end, Failure& fail) {
+  ++stats_.verifications;
+  seq_.clear();
+  seq_.insert(seq_.end(), vs0.tail.begin(), vs0.tail.end());
+  const std::size_t n_tail = seq_.size();
+  std::size_t n_committed = n_tail;  // pulses of seq_ that belong to the commit
+  for (std::size_t i = 0; i < pulses_.size(); ++i) {
+    if (pulses_[i].v <= 0.0) continue;
+    seq_.push_back(pulses_[i]);
+    if (i < commit_pulses_) n_committed = seq_.size();
+  }
+  const double tau_end = st_end_.tau;
+  const auto t_end = static_cast<std::int64_t>(std::ceil(tau_end - 1e-9)) + L_ - 1;
+  std::vector<std::pair<std::int64_t, double>> open = vs0.vbest;
+  auto start_pt = [&](const Pulse& p) { return point(chord(p.chord), p.x0); };
+  auto end_pt = [&](const Pulse& p) { return point(chord(p.chord), p.x1); };
+  std::size_t lo = 0, hi = 0;
+  Vector3d base = seq_.empty() ? vs0.y : start_pt(seq_[0]);
+  Vector3d y_prev = vs0.y;
+  std::int64_t pmin = -1, pmax = -1;  // chord range of the previous period
+  if (!vs0.tail.empty()) {
+    pmin = vs0.tail.front().chord;
+    pmax = vs0.tail.back().chord;
+  }
+  std::size_t lo_at_commit = 0;
+  bool commit_snapped = false;
+  auto vertex_eps = [&](std::int64_t k) {
+    const Chord& c = chord(k);
+    return k > chords_.front().id ? std::min(c.eps, chord(k - 1).eps) : c.eps;
+  };
+  auto snapshot = [&](std::int64_t t, VerifyState& vs) {
+    vs.t = t;
+    vs.y = y_prev;
+    vs.vbest = open;
+    lo_at_commit = lo;
+    commit_snapped = true;
+  };
+  if (t_commit <= vs0.t) snapshot(vs0.t, at_commit);
+  std::int64_t last_chord = seq_.empty() ? committed_.chord : seq_.back().chord;
+  for (std::int64_t t = vs0.t + 1; t <= t_end; ++t) {
+    const double td = static_cast<double>(t);
+    while (hi < seq_.size() && seq_[hi].t0 < td) ++hi;
+    while (lo < hi && seq_[lo].t0 + seq_[lo].dur + (L_ - 1) <= td) {
+      base = end_pt(seq_[lo]);
+      ++lo;
+    }
+    Vector3d y = base;
+    for (std::size_t i = lo; i < hi; ++i) {
+      const Pulse& p = seq_[i];
+      const double f = fir_.progress(td - p.t0, p.dur) / p.dur;
+      y += f * (end_pt(p) - start_pt(p));
+    }
+    std::int64_t cmin = -1, cmax = -1;
+    if (lo < hi) {
+      cmin = seq_[lo].chord;
+      cmax = seq_[hi - 1].chord;
+    } else if (lo < seq_.size()) {
+      cmin = cmax = seq_[lo].chord;
+    } else {
+      cmin = cmax = last_chord;
+    }
+    std::int64_t umin = cmin, umax = cmax;
+    if (pmin >= 0) {
+      umin = std::min(umin, pmin);
+      umax = std::max(umax, pmax);
+    }
+    umin = std::max(umin, chords_.front().id);
+    umax = std::min(umax, next_id_ - 1);
+    if (umax > umin) {
+      // Path error of the output chord [y_prev, y] against the programmed chords in motion.
+      double a0 = kInf, a1 = kInf, b0 = kInf, b1 = kInf, eps = kInf;
+      for (std::int64_t k = umin; k <= umax; ++k) {
+        const Chord& c = chord(k);
+        const double d0 = distance_point_segment(y_prev, c.a, c.b);
+        const double d1 = distance_point_segment(y, c.a, c.b);
+        eps = std::min(eps, c.eps);
+        if (d0 < a0) {
+          a0 = d0;
+          a1 = d1;
+        }
+        if (d1 < b1) {
+          b1 = d1;
+          b0 = d0;
+        }
+      }
+      const double e = chord_bound(a0, a1, b0, b1);
+      if (e > eps) {
+        fail.kind = Failure::Kind::kSample;
+        fail.lo = umin;
+        fail.hi = umax;
+        fail.e = e;
+        fail.eps = eps;
+        return false;
+      }
+      // Vertices in motion: two-sided (each within eps of the output polyline).
+      for (std::int64_t k = umin + 1; k <= umax; ++k) {
+        const Chord& c = chord(k);
+        if (c.turn <= 0.0) continue;
+        const double d = distance_point_segment(c.a, y_prev, y);
+        auto it = std::find_if(open.begin(), open.end(), [&](const auto& o) { return o.first == k; });
+        if (it == open.end()) {
+          open.emplace_back(k, d);
+        } else {
+          it->second = std::min(it->second, d);
+        }
+      }
+    }
+    // Vertices the output window has left.
+    for (std::size_t i = 0; i < open.size();) {
+      if (open[i].first < cmin) {
+        if (open[i].second > vertex_eps(open[i].first)) {
+          fail.kind = Failure::Kind::kVertex;
+          fail.chord = open[i].first;
+          fail.e = open[i].second;
+          fail.eps = vertex_eps(open[i].first);
+          return false;
+        }
+        open.erase(open.begin() + static_cast<std::ptrdiff_t>(i));
+      } else {
+        ++i;
+      }
+    }
+    y_prev = y;
+    pmin = cmin;
+    pmax = cmax;
+    if (!commit_snapped && t >= t_commit) snapshot(t, at_commit);
+  }
+  for (const auto& o : open) {
+    if (o.second > vertex_eps(o.first)) {
+      fail.kind = Failure::Kind::kVertex;
+      fail.chord = o.first;
+      fail.e = o.second;
+      fail.eps = vertex_eps(o.first);
+      return false;
+    }
+  }
+  open.clear();  // the plan ends at rest: every vertex is final
+  at_end.t = std::max(t_end, vs0.t);
+  at_end.y = y_prev;
+  at_end.tail.clear();
+  at_end.vbest.clear();
+  if (!commit_snapped) snapshot(at_end.t, at_commit);
+  // Pulses of the commit still moving the output after its last final period.
+  at_commit.tail.clear();
+  for (std::size_t i = std::min(lo_at_commit, n_committed); i < n_committed; ++i)
+    at_commit.tail.push_back(seq_[i]);
+  (void)n_tail;
+  return true;
+}
+
+void LookaheadPlanner::emit(const Pulse& p) {
+  const Chord& c = chord(p.chord);
+  PlannedSegment s;
+  s.kind = SegmentKind::kMotion;
+  const double fl = std::floor(p.t0);
+  s.start_cycle = static_cast<std::int64_t>(fl);
+  s.start_offset_cycles = p.t0 - fl;
+  s.duration_cycles = p.dur;
+  s.samples = std::max<std::int64_t>(
+      1, static_cast<std::int64_t>(std::ceil(s.start_offset_cycles + p.dur - 1e-12)));
+  s.start_mm = point(c, p.x0);
+  s.end_mm = point(c, p.x1);
+  s.length_mm = p.x1 - p.x0;
+  s.path_start_mm = c.s0 + p.x0;
+  s.feed_mm_min = c.feed_mm_min;
+  s.speed_mm_min = p.v / T_ * 60.0;
+  s.line = c.line;
+  s.rapid = c.rapid;
+  s.spindle = c.spindle;
+  s.spindle_rpm = c.rpm;
+  s.mist = c.mist;
+  s.flood = c.flood;
+  s.tool = c.tool;
+  out_.push_back(s);
+  ++stats_.segments;
+}
+
+void LookaheadPlanner::report_corner(Chord& c) {
+  if (c.reported) return;
+  c.reported = true;
+  if (!corner_cb_ || c.id == chords_.front().id) return;
+  if (c.turn <= 0.0 && !c.stop) return;
+  const Chord& pr = chord(c.id - 1);
+  CornerReport r;
+  r.move_index = c.id;
+  r.line = c.line;
+  r.prev_line = pr.line;
+  r.vertex_mm = c.a;
+  r.angle_deg = c.turn * 180.0 / std::numbers::pi;
+  r.overlap_cycles = L_ - 1 - (c.stop ? L_ - 1 : c.gap);
+  r.model_error_mm = c.model_e;
+  r.tolerance_mm = pr.mode == BlendMode::kLimited ? std::min(pr.tol, c.tol) : 0.0;
+  r.corner_speed_mm_min = std::isfinite(c.C) ? c.C / T_ * 60.0 : pr.feed_mm_min;
+  corner_cb_(r);
+}
+
+void LookaheadPlanner::commit(std::size_t n, const State& st, const VerifyState& vs) {
+  for (std::size_t i = 0; i < n; ++i)
+    if (pulses_[i].v > 0.0) emit(pulses_[i]);
+  for (std::int64_t k = std::max(chords_.front().id, committed_.chord);
+       k < next_id_ && (k < st.chord || (k == st.chord && st.x > 0.0)); ++k)
+    report_corner(chord(k));
+  committed_ = st;
+  vcommitted_ = vs;
+}
+
+void LookaheadPlanner::trim() {
+  if (chords_.empty()) return;
+  const double s_c = committed_.chord < next_id_ ? chord(committed_.chord).s0 + committed_.x : path_mm_;
+  std::int64_t keep = committed_.chord;
+  for (const auto& p : vcommitted_.tail) keep = std::min(keep, p.chord);
+  for (const auto& o : vcommitted_.vbest) keep = std::min(keep, o.first);
+  if (have_fallback_) {
+    for (const auto& p : fallback_) keep = std::min(keep, p.chord);
+  }
+  keep -= 1;  // the chord before a kept vertex (its eps)
+  const double reach = vmax_seen_ * rr_ * 2.0 + 1e-6;
+  while (chords_.size() > 1 && chords_.front().id < keep) {
+    const Chord& c = chords_.front();
+    if (c.s0 + c.len + c.r > s_c - reach) break;
+    chords_.pop_front();
+  }
+}
+
+void LookaheadPlanner::plan(bool final) {
+  if (chords_.empty() || committed_.chord >= next_id_) return;
+  ++stats_.plans;
+  const double s_c = chord(committed_.chord).s0 + committed_.x;
+  const double s_end = path_mm_;
+  double margin = 0.0, brake = 0.0;
+  if (!final) {
+    const double la = lookahead_mm();
+    margin = std::min(dvmax_seen_, vmax_seen_) * (L_ + 1.0) + vmax_seen_ * rr_;
+    brake = la - margin;
+  }
+  double s_stop = s_end - margin;
+  double s_commit = final ? kInf : s_stop - brake;
+  bool forced_stop = false;
+  if (!final && s_commit <= s_c + kTiny) {
+    // Look-ahead full (chord count) but short: stop at its end; the next chord starts from rest.
+    s_stop = s_end;
+    s_commit = kInf;
+    forced_stop = true;
+  }
+  const bool all = final || forced_stop;
+  for (int iter = 0;; ++iter) {
+    for (std::int64_t k = std::max(committed_.chord, chords_.front().id + 1); k < next_id_; ++k) {
+      const Chord& c = chord(k);
+      if (!all && c.s0 > s_stop) break;
+      decide(k, all);
+    }
+    // Vertices behind the committed position whose regions reach forward are already decided.
+    build_pieces(s_c, s_stop, all);
+    backward_pass(all);
+    Failure fail;
+    bool ok = forward(committed_, s_stop, s_commit, fail);
+    VerifyState vc, ve;
+    if (ok) {
+      const std::int64_t t_commit =
+          all ? std::numeric_limits<std::int64_t>::max()
+              : static_cast<std::int64_t>(std::floor(st_commit_.tau));
+      ok = verify(vcommitted_, t_commit, vc, ve, fail);
+    }
+    if (ok) {
+      std::vector<Pulse> rest_of_plan(pulses_.begin() + static_cast<std::ptrdiff_t>(commit_pulses_),
+                                      pulses_.end());
+      const State end_state = st_end_;
+      commit(commit_pulses_, st_commit_, vc);
+      if (all) {
+        have_fallback_ = false;
+        fallback_.clear();
+      } else {
+        have_fallback_ = true;
+        fallback_ = std::move(rest_of_plan);
+        fallback_end_ = end_state;
+        vfallback_end_ = ve;
+      }
+      if (forced_stop) force_stop_next_ = true;  // no blend across the look-ahead end
+      trim();
+      return;
+    }
+    if (iter > 40 && have_fallback_) {
+      // Commit the verified continuation to rest; plan again from there.
+      ++stats_.fallbacks;
+      pulses_ = fallback_;
+      commit(pulses_.size(), fallback_end_, vfallback_end_);
+      have_fallback_ = false;
+      fallback_.clear();
+      trim();
+      if (committed_.chord < next_id_) plan(final);
+      return;
+    }
+    if (iter > 200) throw std::logic_error("look-ahead planner: no feasible plan (bug)");
+    if (fail.kind == Failure::Kind::kWindow) {
+      ++stats_.accel_repairs;
+      Chord& c = chord(std::clamp(fail.chord, chords_.front().id, next_id_ - 1));
+      c.repair_cap = std::min(c.repair_cap, std::min(c.cap, 0.7 * std::max(fail.cap, 1e-9)));
+      if (iter > 30) c.repair_cap = std::min(c.repair_cap, 0.25 * c.repair_cap);
+      // Corners next to it see the lower speed.
+      for (std::int64_t k = c.id; k <= std::min(c.id + 1, next_id_ - 1); ++k)
+        if (k > committed_.chord) chord(k).decided = false;
+      continue;
+    }
+    ++stats_.tolerance_repairs;
+    const double factor = std::clamp(0.97 * fail.eps / std::max(fail.e, 1e-12), 0.3, 0.97);
+    auto tighten = [&](std::int64_t k) {
+      if (k <= chords_.front().id || k >= next_id_ || k < committed_.chord) return;
+      Chord& c = chord(k);
+      if (c.turn <= 0.0 || c.stop) return;
+      c.f *= factor;
+      c.decided = false;
+      if (iter > 12) c.stop = true;
+    };
+    if (fail.kind == Failure::Kind::kVertex) {
+      tighten(fail.chord);
+    } else {
+      bool any = false;
+      for (std::int64_t k = fail.lo + 1; k <= fail.hi; ++k) {
+        if (k > chords_.front().id && k < next_id_ && chord(k).turn > 0.0 && !chord(k).stop) {
+          tighten(k);
+          any = true;
+        }
+      }
+      if (!any) tighten(fail.lo);
+    }
+  }
+}
+
+void LookaheadPlanner::barrier(SegmentKind kind, const std::string& msg, const Block& b,
+                               double extra_s) {
+  plan(true);
+  // The output has settled L - 1 periods after the last command.
+  std::int64_t t_stop = static_cast<std::int64_t>(std::ceil(earliest_tau_));
+  if (committed_.tau > earliest_tau_)
+    t_stop = std::max(t_stop, static_cast<std::int64_t>(std::ceil(committed_.tau - 1e-9)) + L_ - 1);
+  if (kind != SegmentKind::kMotion) {
+    PlannedSegment s;
+    s.kind = kind;
+    s.start_cycle = t_stop;
+    s.start_mm = s.end_mm = pos_;
+    s.line = b.line;
+    s.path_start_mm = path_mm_;
+    s.spindle = b.spindle;
+    s.spindle_rpm = b.spindle_rpm;
+    s.mist = b.mist;
+    s.flood = b.flood;
+    s.tool = b.tool;
+    if (!msg.empty()) {
+      messages_.push_back(msg);
+      s.message_id = static_cast<int>(messages_.size()) - 1;
+    }
+    out_.push_back(s);
+  }
+  earliest_tau_ = static_cast<double>(t_stop + static_cast<std::int64_t>(
+                                                   std::ceil(extra_s / T_ - 1e-9)));
+  // Everything before has stopped exactly on the last point: start afresh from rest.
+  if (!chords_.empty()) {
+    for (auto& c : chords_) report_corner(c);
+  }
+  chords_.clear();
+  have_fallback_ = false;
+  fallback_.clear();
+  committed_.tau = earliest_tau_;
+  committed_.chord = next_id_;
+  committed_.x = 0.0;
+  committed_.rest_done = false;
+  committed_.hist.ring.assign(committed_.hist.ring.size(), Vector3d::Zero());
+  committed_.hist.newest = static_cast<std::int64_t>(earliest_tau_);
+  committed_.hist.partial.setZero();
+  committed_.hist.w_prev.setZero();
+  vcommitted_.t = static_cast<std::int64_t>(earliest_tau_);
+  vcommitted_.y = pos_;
+  vcommitted_.tail.clear();
+  vcommitted_.vbest.clear();
+  start_from_rest_ = true;
+}
+
+}  // namespace contour::control
