@@ -91,6 +91,17 @@ TEST(PlcConfig, ExampleMachineLoadsAndCompiles) {
   EXPECT_EQ(p.compiled->entries.size(), p.compiled->symbols.all().size());
 }
 
+// The HIL variant: the same programs on contour-machine-sim's coupler.
+TEST(PlcConfig, HilFragmentLoadsWithTheSamePrograms) {
+  const std::string y = read(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml") + "\n" +
+                        read(std::string(CONTOUR_SOURCE_DIR) + "/config/plc/hil_machine.yaml");
+  const cc::Config cfg = cc::load_config_string(y, kSimName);
+  ASSERT_NE(cfg.plc.compiled, nullptr);
+  ASSERT_EQ(cfg.plc.modbus.size(), 1u);
+  EXPECT_EQ(cfg.plc.modbus[0].transport.port, 1503);
+  EXPECT_EQ(cfg.plc.compiled->programs.size(), 5u);
+}
+
 TEST(PlcConfig, EveryBindingKind) {
   const std::string y = std::string(kMinimal) + R"(plc:
   allow_forcing: true
