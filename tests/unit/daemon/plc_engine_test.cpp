@@ -433,6 +433,38 @@ TEST(PlcEngine, LostIoCouplerLatchesAFaultUntilItIsBackAndReset) {
   server.stop();
 }
 
+TEST(PlcEngine, GpioLinesThroughTheGpioThread) {
+  Scratch s;
+  s.file("p.st", "PROGRAM p\n  lamp := NOT door;\nEND_PROGRAM\n");
+  Rig r(s.load(std::string(kMachine) + R"(bus: {type: sim}
+gpio: {backend: sim, estop: {name: ESTOP}}
+plc:
+  gpio_poll_ms: 1
+  programs: [{file: p.st}]
+  signals:
+    - {name: door, direction: input, gpio: {name: DOOR}}
+    - {name: lamp, direction: output, gpio: {name: LAMP}, default: true}
+)"));
+  auto* sim = r.engine.sim_gpio();
+  ASSERT_NE(sim, nullptr);
+  EXPECT_TRUE(sim->output_active("LAMP"));  // requested at its default
+  sim->set_input_level("DOOR", true);
+  r.engine.start();
+  bool ok = false;
+  for (int k = 0; k < 5000 && !ok; ++k) {
+    r.scan();
+    ok = r.value("door").i == 1 && !sim->output_active("LAMP");
+    std::this_thread::sleep_for(1ms);
+  }
+  EXPECT_TRUE(ok);
+  r.engine.stop();
+  EXPECT_TRUE(sim->output_active("LAMP"));  // back to its default at stop
+  r.scan(20);
+  const auto io = plc_io_json(r.engine.snapshot());
+  EXPECT_EQ(io["signals"][0]["source"], "gpio door (line 'DOOR')");
+  EXPECT_EQ(io["signals"][0]["direction"], "input");
+}
+
 TEST(PlcEngine, CiaBindingsDataPath) {
   Scratch s;
   s.file("p.st", "PROGRAM p\n  brake_lamp := x_home;\n  ao := ai * 2.0;\n  do3 := di5;\nEND_PROGRAM\n");
