@@ -153,6 +153,22 @@ std::vector<CommandSpec> build_table() {
        {typed("line", ArgType::kString, true, "a string (role or line name)", "role or line name"),
         typed("level", ArgType::kLevel, true, "0 or 1 (physical level)", "physical level")},
        kAnyState, false, false, "any", "{line, level}"});
+  add({CommandId::kIo, "io",
+       "soft PLC I/O image (plc:): list the signals, or force / unforce one (sim bus or "
+       "plc.allow_forcing only)",
+       {typed("action", ArgType::kChoice, false, "\"list\", \"force\" or \"unforce\"",
+              "list (default), force or unforce", "list|force|unforce"),
+        typed("name", ArgType::kString, false, "a string (signal name; unforce: or \"all\")",
+              "force/unforce: the signal of plc.signals"),
+        typed("value", ArgType::kAny, false, "a value", "force: TRUE/FALSE, a number or T#2s")},
+       kAnyState, false, false, "any",
+       "list: {cycle, forcing_allowed, signals: [{name, type, direction, source, value, forced, "
+       "forceable, description}]}; force/unforce: {name, forced, value}"});
+  add({CommandId::kPlcStatus, "plc_status",
+       "soft PLC status: programs' scan times and overruns, I/O couplers, M-code and tool-change "
+       "handshakes, latched faults, requests to the NC",
+       {}, kAnyState, false, false, "any",
+       "{present, cycle, scan_us, programs, devices, mcode, tool_change, faults, requests, cause}"});
   add({CommandId::kShutdown, "shutdown", "controlled stop, drives disabled, exit 0", {}, kAnyState,
        false, false, "any", "{shutting_down}"});
   return t;

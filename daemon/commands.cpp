@@ -129,6 +129,7 @@ json Daemon::status_json() {
            {"last_wait_s", st.spindle_last_wait_s}}},
          {"force", force_json()},
          {"gpio", gpio_json()},
+         {"plc", plc_brief_json(st)},
          {"telemetry_dropped", writer_->dropped()},
          {"events_dropped", logger_->dropped()},
          {"timing",
@@ -740,6 +741,8 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     }
     case CommandId::kForce: return cmd_force(req);
     case CommandId::kSimGpio: return cmd_sim_gpio(req);
+    case CommandId::kIo: return cmd_io(req);
+    case CommandId::kPlcStatus: return cmd_plc_status(req);
     case CommandId::kShutdown:
       spdlog::info("shutdown requested by socket client pid {} uid {}", client.pid, client.uid);
       request_shutdown();

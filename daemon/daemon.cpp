@@ -186,6 +186,14 @@ void Daemon::start_components() {
   LoopOptions lopt;
   lopt.force_stale_faults = cfg_.force.stale_faults;  // force.fallback: fault
   loop_ = std::make_unique<ServoLoop>(cfg_, *bus_, 4096, io_.get(), lopt);
+  if (cfg_.plc.present) {
+    // Soft PLC (issue 20): its GPIO signals share the daemon's simulated backend (gpio.backend:
+    // sim); on real lines it opens its own. Scanned in the loop's `logic` stage.
+    plc_ = std::make_unique<PlcEngine>(cfg_, io_->sim_gpio(),
+                                       [](const std::string& m) { spdlog::info("plc: {}", m); });
+    loop_->attach_plc(plc_.get());
+    plc_->start();
+  }
   io_->start([this] {
     const auto st = loop_->status();
     return IoOutputs{st.out_drive_enable, st.out_spindle_enable, st.out_mist, st.out_flood, st.cycle};
@@ -261,6 +269,7 @@ void Daemon::stop_components() {
     rt_stop_.store(true, std::memory_order_release);
     rt_.join();
   }
+  if (plc_) plc_->stop();  // after the loop: PLC outputs to their defaults
   if (io_) io_->stop();  // after the loop: outputs to their safe state
   if (bus_) bus_->stop();
   if (writer_) writer_->stop();

@@ -113,6 +113,9 @@ class Daemon {
   // A run-time argument range of the command table (the configuration): {lo, hi}.
   [[nodiscard]] std::pair<double, double> bound(Bound b, const nlohmann::json& req) const;
   nlohmann::json cmd_sim_gpio(const nlohmann::json& req);
+  nlohmann::json cmd_io(const nlohmann::json& req);          // commands_plc.cpp
+  nlohmann::json cmd_plc_status(const nlohmann::json& req);  // commands_plc.cpp
+  nlohmann::json plc_brief_json(const LoopStatus& st);       // commands_plc.cpp: status.plc
   nlohmann::json force_json();
   nlohmann::json gpio_json();
 
@@ -120,6 +123,7 @@ class Daemon {
   DaemonOptions opt_;
   std::unique_ptr<AxisBus> bus_;
   std::unique_ptr<IoChannels> io_;  // before loop_: the loop holds a pointer to it
+  std::unique_ptr<PlcEngine> plc_;  // soft PLC (plc: section; null without); before loop_
   std::unique_ptr<ServoLoop> loop_;
   std::unique_ptr<TelemetryWriter> writer_;
   std::unique_ptr<EventLogger> logger_;

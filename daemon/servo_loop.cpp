@@ -246,7 +246,8 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       program_.attach(c.job);
       break;
     case CommandKind::kRun:
-      if (st != MachineState::kReady || !program_.attached() || jog_.active()) {
+      if (st != MachineState::kReady || !program_.attached() || jog_.active() ||
+          plc_req_.inhibit_start) {  // soft PLC: NC.inhibit_start
         refuse();
         break;
       }
@@ -260,7 +261,8 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       transition(sm_.apply(Request::kHold), FaultCause::kNone);
       break;
     case CommandKind::kResume:
-      if (program_.stopping()) {
+      // Soft PLC: no resume while it holds (NC.feed_hold_req) or inhibits start.
+      if (program_.stopping() || plc_req_.feed_hold || plc_req_.inhibit_start) {
         refuse();
         break;
       }
@@ -298,7 +300,7 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
     }
     case CommandKind::kJog: {
       if (st != MachineState::kReady || c.axis < 0 || c.axis >= axes_ || !(c.a > 0.0) ||
-          !std::isfinite(c.b)) {
+          !std::isfinite(c.b) || plc_req_.inhibit_start) {
         refuse();
         break;
       }
@@ -343,8 +345,14 @@ void ServoLoop::refuse_command(CommandKind k) noexcept {
 
 bool ServoLoop::try_reset() noexcept {
   reset_block_ = supervisor_.reset_block(fb_, io_ != nullptr && io_->estop_tripped());
+  // Soft PLC: refused while it still requests E-stop / fault / an axis fault or a latched engine
+  // fault's cause remains (FaultCause has no PLC entry yet: kInternal names it).
+  if (!reset_block_ && plc_ != nullptr && !plc_->causes_gone()) {
+    reset_block_ = ResetBlock{FaultCause::kInternal, -1, 0};
+  }
   const Transition t = sm_.reset(!reset_block_);
   if (!t.accepted) return false;
+  if (plc_ != nullptr) plc_->reset();
   ++resets_;
   transition(t, FaultCause::kNone);
   force_.clear_fallback();
@@ -359,6 +367,87 @@ bool ServoLoop::all_axes_enabled() const noexcept {
   bool all = axes_ > 0;
   for (int i = 0; i < axes_; ++i) all = all && fb_.bus.axis[static_cast<std::size_t>(i)].enabled;
   return all;
+}
+
+const char* to_string(PlcAction a) noexcept {
+  switch (a) {
+    case PlcAction::kNone: return "none";
+    case PlcAction::kEstop: return "estop_req";
+    case PlcAction::kFault: return "fault_req";
+    case PlcAction::kAxisFault: return "axis_fault";
+    case PlcAction::kEngineFault: return "engine_fault";
+    case PlcAction::kStop: return "stop_req";
+    case PlcAction::kHold: return "feed_hold_req";
+  }
+  return "?";
+}
+
+// The `logic` stage: one soft PLC scan over this cycle's snapshot, then its requests, through the
+// state machine like an operator's (never around it: the PLC cannot enable, reset or release).
+void ServoLoop::logic() noexcept {
+  if (plc_ == nullptr) return;
+  const MachineState st = sm_.state();
+  const control::InterpOutput& io = program_.output();
+  PlcNcInput in;
+  in.cycle = cycle_;
+  in.state = st;
+  in.program_running = in_program(st) && st == MachineState::kRunning;
+  in.spindle_on = spindle_.target_rpm() != 0.0;
+  in.spindle_at_speed = spindle_.at_speed();
+  in.spindle_rpm = fb_.bus.spindle.present ? fb_.bus.spindle.actual_rpm : spindle_.target_rpm();
+  in.coolant_mist = program_.attached() && io.mist;
+  in.coolant_flood = program_.attached() && io.flood;
+  in.axes = axes_;
+  for (int i = 0; i < axes_; ++i) in.pos_mm[static_cast<std::size_t>(i)] = fb_.act_mm[i];
+  in.tool = io.tool;
+  in.estop_input = fb_.estop_input;
+  in.drive_enable = pub_.out_drive_enable;  // last cycle's outputs (this cycle's come later)
+  in.spindle_enable = pub_.out_spindle_enable;
+  in.alive = true;
+  plc_->scan(in, plc_out_);
+  const PlcRequests& rq = plc_out_.requests;
+  plc_req_ = rq;
+
+  auto note = [&](PlcAction a, int axis, std::int32_t code, PlcFaultKind k) {
+    plc_cause_ = PlcStopCause{a, cycle_, axis, code, k};
+  };
+  if (plc_out_.fault) plc_engine_fault_ = plc_out_.fault;
+  if (rq.estop) {
+    if (st != MachineState::kEstop) {
+      note(PlcAction::kEstop, -1, 0, PlcFaultKind::kNone);
+      enter_estop(FaultCause::kInternal);
+    }
+  } else if (st != MachineState::kFault && st != MachineState::kEstop) {
+    if (plc_out_.fault) {
+      note(PlcAction::kEngineFault, plc_out_.fault.index, plc_out_.fault.code, plc_out_.fault.kind);
+      raise_fault(FaultReport{FaultCause::kInternal, plc_out_.fault.index, plc_out_.fault.value,
+                              plc_out_.fault.limit});
+    } else if (rq.fault) {
+      note(PlcAction::kFault, -1, rq.fault_code, PlcFaultKind::kNone);
+      raise_fault(FaultReport{FaultCause::kInternal, -1, static_cast<double>(rq.fault_code), 0.0});
+    } else {
+      for (int i = 0; i < axes_; ++i) {
+        if (!rq.axis_fault[static_cast<std::size_t>(i)]) continue;
+        note(PlcAction::kAxisFault, i, 0, PlcFaultKind::kNone);
+        raise_fault(FaultReport{FaultCause::kInternal, i, 1.0, 0.0});
+        break;
+      }
+    }
+  }
+  const MachineState now = sm_.state();
+  if (rq.stop) {
+    if ((now == MachineState::kRunning || now == MachineState::kHold) && program_.attached()) {
+      note(PlcAction::kStop, -1, 0, PlcFaultKind::kNone);
+      program_.request_stop();
+      transition(sm_.apply(Request::kStop), FaultCause::kNone);
+    } else if (jog_.active()) {
+      jog_.brake(ref_[jog_.axis()], limits_.max_accel_mm_s2[static_cast<std::size_t>(jog_.axis())]);
+    }
+  }
+  if (rq.feed_hold && now == MachineState::kRunning) {
+    note(PlcAction::kHold, -1, 0, PlcFaultKind::kNone);
+    transition(sm_.apply(Request::kHold), FaultCause::kNone);
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -622,7 +711,9 @@ void ServoLoop::channels(MachineState st, AxisCommands& out) noexcept {
   }
   if (ev.recovered) emit(EventKind::kForceRecovered);
   if (force_.configured() && io_ != nullptr) io_->set_spindle_rpm(std::abs(force_.spindle_rpm_cmd()));
-  const double rpm = spindle_.step(force_.spindle_rpm_cmd(), out.mode, fb_.bus.spindle, io_, period_s_);
+  // Soft PLC: NC.spindle_inhibit holds the spindle at 0 (the ramp brings it down).
+  const double rpm_req = plc_req_.spindle_inhibit ? 0.0 : force_.spindle_rpm_cmd();
+  const double rpm = spindle_.step(rpm_req, out.mode, fb_.bus.spindle, io_, period_s_);
   out.spindle_rpm = out.mode == DriveMode::kEnabled ? rpm : 0.0;
 }
 
@@ -749,13 +840,20 @@ void ServoLoop::publish() noexcept {
   // (the rate-limited command ramps down with it).
   pub_.out_spindle_enable = out_.mode == DriveMode::kEnabled && spindle_.target_rpm() != 0.0;
   const bool attached = program_.attached();
-  pub_.out_mist = attached && io.mist && sm_.state() != MachineState::kEstop;
-  pub_.out_flood = attached && io.flood && sm_.state() != MachineState::kEstop;
+  // With the soft PLC the coolant lines are its outputs (M7/M8/M9 unless a program owns them).
+  const bool mist = plc_ != nullptr ? plc_out_.coolant_mist : attached && io.mist;
+  const bool flood = plc_ != nullptr ? plc_out_.coolant_flood : attached && io.flood;
+  pub_.out_mist = mist && sm_.state() != MachineState::kEstop;
+  pub_.out_flood = flood && sm_.state() != MachineState::kEstop;
   pub_.estop_input = fb_.estop_input;
   pub_.stop_phase = stop_.phase();
   pub_.reset_block = reset_block_;
   pub_.soft_min_mm = limits_.min_mm;
   pub_.soft_max_mm = limits_.max_mm;
+  pub_.plc_present = plc_ != nullptr;
+  pub_.plc_requests = plc_req_;
+  pub_.plc_engine_fault = plc_engine_fault_;
+  pub_.plc_cause = plc_cause_;
   std::atomic_thread_fence(std::memory_order_release);
   seq_.store(s0 + 2, std::memory_order_release);
 }

@@ -49,6 +49,7 @@
 #include "daemon/loop_channels.hpp"
 #include "daemon/loop_stages.hpp"
 #include "daemon/machine_state.hpp"
+#include "daemon/plc_engine.hpp"
 #include "daemon/program_job.hpp"
 #include "daemon/reference_sources.hpp"
 #include "daemon/rt_timing.hpp"
@@ -122,6 +123,17 @@ struct TelemetrySample {
   double spindle_rpm = 0.0;
   float lateness_us = 0.0F;  // wake-up lateness of this cycle (0 when cycle() is stepped by a test)
 };
+
+// The last thing the soft PLC did to the machine (status: why it is in FAULT / ESTOP / HOLD).
+enum class PlcAction : std::uint8_t { kNone, kEstop, kFault, kAxisFault, kEngineFault, kStop, kHold };
+struct PlcStopCause {
+  PlcAction action = PlcAction::kNone;
+  std::uint64_t cycle = 0;
+  int axis = -1;
+  std::int32_t code = 0;                       // NC.fault_code, or the engine fault's code
+  PlcFaultKind engine = PlcFaultKind::kNone;   // kEngineFault: which
+};
+[[nodiscard]] const char* to_string(PlcAction a) noexcept;
 
 // Published status (seqlock).
 struct LoopStatus {
@@ -198,6 +210,11 @@ struct LoopStatus {
   ResetBlock reset_block{};         // why the last reset was refused (kNone: not refused)
   std::array<double, 3> soft_min_mm{};  // live soft limits (machine coordinates)
   std::array<double, 3> soft_max_mm{};
+  // Soft PLC (issue 20; attach_plc): its requests this cycle and the last PLC cause of a stop.
+  bool plc_present = false;
+  PlcRequests plc_requests{};
+  PlcFault plc_engine_fault{};     // the last fault the engine latched (I/O stale, timeout, ...)
+  PlcStopCause plc_cause{};        // what the PLC did to the machine last (FAULT/ESTOP/hold)
 };
 
 struct LoopOptions {
@@ -230,6 +247,14 @@ class ServoLoop {
   // Same for the live safety limits (validate(LiveLimits)). Returns the limits generation.
   std::uint64_t stage_limits(const LiveLimits& l);
 
+  // The soft PLC (daemon/plc_engine.hpp), scanned in the `logic` stage; not owned, attached
+  // before run() (null: no PLC). Its requests act through the state machine: NC.estop_req ->
+  // ESTOP, NC.fault_req / NC.axis_fault_* / an engine fault -> FAULT (controlled stop),
+  // NC.stop_req -> stop, NC.feed_hold_req -> HOLD and resume refused, NC.inhibit_start -> run,
+  // resume and jog refused, NC.spindle_inhibit -> spindle speed 0. A reset is refused while the
+  // PLC still requests (PlcEngine::causes_gone()); an accepted one resets the engine.
+  void attach_plc(PlcEngine* plc) noexcept { plc_ = plc; }
+
   [[nodiscard]] LoopStatus status() const noexcept;
   [[nodiscard]] CycleStats& stats() noexcept { return stats_; }
   SpscRing<RtEvent>& events() noexcept { return events_; }
@@ -247,7 +272,7 @@ class ServoLoop {
   void take_staged() noexcept;
   void read() noexcept;
   void run_commands() noexcept;
-  void logic() noexcept {}  // the machine-logic scan lands here (soft PLC)
+  void logic() noexcept;  // one soft PLC scan, its requests to the state machine
   MachineState advance_state() noexcept;
   RefPoint reference(MachineState st, bool servo) noexcept;
   AxisCommands control_step(const RefPoint& r, MachineState st, bool servo,
@@ -349,6 +374,13 @@ class ServoLoop {
   bool finished_ok_ = false;
   std::uint64_t missed_tpdos_ = 0, clamps_ = 0;
   std::uint64_t gains_generation_ = 0, gains_cycle_ = 0;
+
+  // Soft PLC (logic stage).
+  PlcEngine* plc_ = nullptr;
+  PlcCycleOutput plc_out_{};
+  PlcRequests plc_req_{};  // this cycle's requests (commands use the previous cycle's)
+  PlcFault plc_engine_fault_{};
+  PlcStopCause plc_cause_{};
 
   // Seqlock-published status.
   mutable std::atomic<std::uint64_t> seq_{0};

@@ -27,6 +27,7 @@
 #include "config/config.hpp"
 #include "drivers/can/socket_can.hpp"
 #include "tools/contour-machine-sim/dynamometer_server.hpp"
+#include "tools/contour-machine-sim/plant_io.hpp"
 #include "tools/contour-machine-sim/sim_drive.hpp"
 #include "tools/contour-machine-sim/storm.hpp"
 
@@ -131,6 +132,8 @@ int main(int argc, char** argv) {
       "(sync = SYNC frames received since start). The summary gains \"storm\": {\"seed\",\n"
       "\"events\": {kind: n}, \"tpdo_dropped\": TPDOs withheld (storm and --drop-tpdo),\n"
       "\"emcy_sent\": EMCYs of drive_fault events, incl. the error-reset EMCY after the reset}.");
+  contour::sim::PlantOptions plant_opt;  // --plant-io, --plant-event (soft PLC I/O, issue 20)
+  contour::sim::add_plant_options(app, plant_opt);
   CLI11_PARSE(app, argc, argv);
 
   contour::config::Config cfg;
@@ -172,6 +175,20 @@ int main(int argc, char** argv) {
       std::cout << "dynamometer: modbus tcp " << host << ":" << dyno->port() << std::endl;
     } catch (const std::exception& e) {
       std::cerr << "contour-machine-sim: dynamometer: " << e.what() << "\n";
+      return 69;
+    }
+  }
+
+  std::unique_ptr<contour::sim::PlantRunner> plant;
+  if (!plant_opt.endpoint.empty()) {
+    try {
+      plant = std::make_unique<contour::sim::PlantRunner>(plant_opt, cfg);
+      std::cout << "plant io: modbus tcp " << plant->host() << ":" << plant->port() << std::endl;
+    } catch (const std::invalid_argument& e) {
+      std::cerr << "contour-machine-sim: " << e.what() << "\n";
+      return 2;
+    } catch (const std::exception& e) {
+      std::cerr << "contour-machine-sim: plant io: " << e.what() << "\n";
       return 69;
     }
   }
@@ -388,6 +405,13 @@ int main(int argc, char** argv) {
       }
     }
     for (auto& d : drives) d->tick_wall(now);
+    if (plant && !drives.empty()) {
+      std::array<double, 3> axis_mm{};
+      std::size_t a = 0;
+      for (const auto& d : drives)
+        if (!d->is_spindle() && a < 3) axis_mm[a++] = d->position_mm();
+      plant->step(drives.front()->syncs(), axis_mm);
+    }
     if (dyno) {
       double v2 = 0.0, rpm = 0.0;
       for (const auto& d : drives) {
@@ -419,6 +443,7 @@ int main(int argc, char** argv) {
     j["nodes"].push_back(n);
   }
   if (storm) j["storm"] = storm->summary();
+  if (plant) j["plant"] = plant->summary();
   std::cout << j.dump() << std::endl;
   return 0;
 }

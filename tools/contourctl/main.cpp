@@ -554,6 +554,12 @@ int main(int argc, char** argv) {
   watch->add_option("--count", watch_count, "stop after N updates (0: until Ctrl-C)");
   auto* force = app.add_subcommand("force", "force on [NEWTON] | force off | force ref NEWTON | force status");
   force->add_option("ARGS", force_args)->required();
+  // Soft PLC (issue 20).
+  std::vector<std::string> io_args, plc_args;
+  auto* io = app.add_subcommand("io", "soft PLC I/O image | io force NAME VALUE | io unforce NAME|all");
+  io->add_option("ARGS", io_args);
+  auto* plc = app.add_subcommand("plc", "plc status: PLC programs' scan times, couplers, handshakes, faults");
+  plc->add_option("ARGS", plc_args)->required();
   auto* circle = app.add_subcommand(
       "circle-test", "seed 003 circle test: per-axis gain and time constant, matched gains");
   circle->add_option("--radius", co.radius_mm, "circle radius (mm)");
@@ -685,6 +691,50 @@ int main(int argc, char** argv) {
         std::cerr << "contourctl: force ref NEWTON\n";
         return kExitUsage;
       }
+    } else if (cmd == "io") {
+      const std::size_t n = io_args.size();
+      if (n == 0) {
+        const json r = c.call(req);
+        if (as_json) {
+          print(r, true);
+        } else {
+          std::printf("%-24s %-5s %-10s %-10s %s\n", "NAME", "TYPE", "DIRECTION", "VALUE", "SOURCE");
+          for (const auto& sg : r.value("signals", json::array())) {
+            std::string v = sg.contains("value") ? sg["value"].dump() : "?";
+            if (sg.value("forced", false)) v += " (forced)";
+            std::printf("%-24s %-5s %-10s %-10s %s\n", sg.value("name", std::string()).c_str(),
+                        sg.value("type", std::string()).c_str(),
+                        sg.value("direction", std::string()).c_str(), v.c_str(),
+                        sg.value("source", std::string()).c_str());
+          }
+        }
+        return kExitOk;
+      }
+      if (io_args[0] == "force" && n == 3) {
+        req["action"] = "force";
+        req["name"] = io_args[1];
+        req["value"] = io_args[2];
+      } else if (io_args[0] == "unforce" && n == 2) {
+        req["action"] = "unforce";
+        req["name"] = io_args[1];
+      } else {
+        std::cerr << "contourctl: io | io force NAME VALUE | io unforce NAME|all\n";
+        return kExitUsage;
+      }
+      const json r = c.call(req);
+      if (as_json)
+        print(r, true);
+      else
+        std::cout << "io: " << r.value("name", std::string()) << " "
+                  << (r.value("forced", false) ? "forced to " + r["value"].dump() : "unforced") << '\n';
+      return kExitOk;
+    } else if (cmd == "plc") {
+      if (plc_args.size() != 1 || plc_args[0] != "status") {
+        std::cerr << "contourctl: plc status\n";
+        return kExitUsage;
+      }
+      print(c.call({{"cmd", "plc_status"}}), as_json);
+      return kExitOk;
     } else if (cmd == "record") {
       if (record_args[0] != "start" && record_args[0] != "stop") {
         std::cerr << "contourctl: record start [NAME] | record stop [--plot F.png]\n";

@@ -1,0 +1,220 @@
+// The soft PLC in the servo loop's `logic` stage (issue 20, phase 2): config/sim_plc.yaml's
+// example machine logic on the in-process simulated machine, stepped in lockstep. The PLC only
+// requests; the state machine acts: door open -> HOLD, resume refused while it is open, allowed
+// once it closes; run / jog refused while start is inhibited; an overtravel switch faults the
+// axis and the reset is refused until it is released; no allocation in a cycle with the PLC.
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "daemon/plc_engine.hpp"
+#include "loop_rig.hpp"
+#include "tests/support/alloc_counter.hpp"
+
+namespace contour::daemon {
+namespace {
+
+using test_rig::Rig;
+
+std::string slurp(const std::string& rel) {
+  std::ifstream f(std::string(CONTOUR_SOURCE_DIR) + "/" + rel);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+config::Config sim_plc() {
+  return config::load_config_file(std::string(CONTOUR_SOURCE_DIR) + "/config/sim_plc.yaml");
+}
+
+bool refused(const Rig& r, CommandKind k, std::size_t from) {
+  for (std::size_t i = from; i < r.events.size(); ++i) {
+    if (r.events[i].kind == EventKind::kCommandRefused && r.events[i].command == k) return true;
+  }
+  return false;
+}
+
+struct PlcRig {
+  PlcRig() : cfg(sim_plc()), rig(cfg), plc(cfg) {
+    rig.loop.attach_plc(&plc);
+    plc.start();
+  }
+  ~PlcRig() { plc.stop(); }
+  config::Config cfg;
+  Rig rig;
+  PlcEngine plc;
+};
+
+// config/sim_plc.yaml is config/sim.yaml plus config/plc/sim_machine.yaml, nothing else: the
+// example stays what the lead merges, and sim.yaml's behaviour is untouched.
+TEST(PlcLoop, SimPlcConfigIsSimYamlPlusTheExampleFragment) {
+  const std::string plc = slurp("config/sim_plc.yaml");
+  const std::string body = slurp("config/sim.yaml") + "\n" + slurp("config/plc/sim_machine.yaml");
+  ASSERT_GT(plc.size(), body.size());
+  EXPECT_EQ(plc.substr(plc.size() - body.size()), body);
+  EXPECT_FALSE(test_rig::sim_config().plc.present);
+  EXPECT_TRUE(sim_plc().plc.present);
+}
+
+TEST(PlcLoop, DoorOpenHoldsTheProgramResumeOnlyOnceItIsClosed) {
+  PlcRig p;
+  Rig& r = p.rig;
+  ASSERT_TRUE(r.enable());
+  r.step(50);
+  auto job = r.load("G1 X20 F600\nM2\n", 1);
+  r.step(5);
+  r.loop.post({CommandKind::kRun});
+  r.step(300);
+  ASSERT_EQ(r.loop.status().state, MachineState::kRunning);
+  const double x0 = r.loop.status().act_mm[0];
+
+  p.plc.sim_plant()->set_door_open(true);
+  r.step(5);
+  auto st = r.loop.status();
+  EXPECT_EQ(st.state, MachineState::kHold);
+  EXPECT_TRUE(st.plc_requests.feed_hold);
+  EXPECT_TRUE(st.plc_requests.inhibit_start);
+  EXPECT_TRUE(st.plc_requests.spindle_inhibit);
+  EXPECT_EQ(st.plc_cause.action, PlcAction::kHold);
+  r.step(500);  // the hold ramps the feed down: the axis stops short of the end
+  const double x_hold = r.loop.status().act_mm[0];
+  EXPECT_GT(x_hold, x0);
+  EXPECT_LT(x_hold, 19.0);
+
+  std::size_t mark = r.events.size();
+  r.loop.post({CommandKind::kResume});
+  r.step(5);
+  EXPECT_TRUE(refused(r, CommandKind::kResume, mark));
+  EXPECT_EQ(r.loop.status().state, MachineState::kHold);
+
+  p.plc.sim_plant()->set_door_open(false);
+  r.step(5);
+  st = r.loop.status();
+  EXPECT_FALSE(st.plc_requests.feed_hold);
+  EXPECT_EQ(st.state, MachineState::kHold);  // closing the door does not resume by itself
+  mark = r.events.size();
+  r.loop.post({CommandKind::kResume});
+  r.step(5);
+  EXPECT_FALSE(refused(r, CommandKind::kResume, mark));
+  EXPECT_EQ(r.loop.status().state, MachineState::kRunning);
+  for (int i = 0; i < 60 && r.loop.status().state != MachineState::kReady; ++i) r.step(100);
+  st = r.loop.status();
+  EXPECT_EQ(st.state, MachineState::kReady);
+  EXPECT_TRUE(st.finished_ok);
+  EXPECT_NEAR(st.act_mm[0], 20.0, 0.01);
+}
+
+TEST(PlcLoop, InhibitStartRefusesRunAndJog) {
+  PlcRig p;
+  Rig& r = p.rig;
+  ASSERT_TRUE(r.enable());
+  r.step(50);
+  p.plc.sim_plant()->set_door_open(true);
+  r.step(5);
+  ASSERT_TRUE(r.loop.status().plc_requests.inhibit_start);
+  auto job = r.load("G1 X5 F600\nM2\n", 1);
+  r.step(5);
+  std::size_t mark = r.events.size();
+  r.loop.post({CommandKind::kRun});
+  r.loop.post({CommandKind::kJog, 0, 10.0, 1.0});
+  r.step(5);
+  EXPECT_TRUE(refused(r, CommandKind::kRun, mark));
+  EXPECT_TRUE(refused(r, CommandKind::kJog, mark));
+  EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+  p.plc.sim_plant()->set_door_open(false);
+  r.step(5);
+  mark = r.events.size();
+  r.loop.post({CommandKind::kRun});
+  r.step(5);
+  EXPECT_FALSE(refused(r, CommandKind::kRun, mark));
+  EXPECT_EQ(r.loop.status().state, MachineState::kRunning);
+}
+
+// An overtravel switch (the simulated plant's, kLimitMargin_mm beyond the soft limit) faults its
+// axis; reset is refused while it is actuated and accepted once it is released (forced off here:
+// the sim bus allows forcing).
+TEST(PlcLoop, OvertravelFaultsTheAxisResetOnlyOnceReleased) {
+  PlcRig p;
+  Rig& r = p.rig;
+  ASSERT_TRUE(r.enable());
+  r.step(20);
+  ASSERT_EQ(p.plc.force("limit_y_pos", "TRUE"), "");
+  r.step(3);
+  auto st = r.loop.status();
+  EXPECT_EQ(st.state, MachineState::kFault);
+  EXPECT_EQ(st.plc_cause.action, PlcAction::kAxisFault);
+  EXPECT_EQ(st.plc_cause.axis, 1);
+  EXPECT_TRUE(st.plc_requests.axis_fault[1]);
+  r.step(600);  // the controlled stop finishes
+  std::size_t mark = r.events.size();
+  r.loop.post({CommandKind::kReset});
+  r.step(300);  // the reset window runs out
+  EXPECT_TRUE(refused(r, CommandKind::kReset, mark));
+  EXPECT_EQ(r.loop.status().state, MachineState::kFault);
+  EXPECT_EQ(r.loop.status().reset_block.cause, FaultCause::kInternal);
+
+  ASSERT_EQ(p.plc.unforce("limit_y_pos"), "");
+  r.step(3);
+  r.loop.post({CommandKind::kReset});
+  r.step(20);
+  EXPECT_NE(r.loop.status().state, MachineState::kFault);
+  r.step(20);
+  EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+}
+
+// A PLC E-stop request: ESTOP at once, reset refused while it is requested.
+TEST(PlcLoop, EstopRequestAndItsReset) {
+  config::Config cfg = test_rig::sim_config();
+  const std::string dir = ::testing::TempDir();
+  {
+    std::ofstream(dir + "/estop.st") << "PROGRAM e\n  NC.estop_req := stop_button;\nEND_PROGRAM\n";
+  }
+  const std::string yaml = slurp("config/sim.yaml") + "\nplc:\n  programs: [{file: " + dir +
+                           "/estop.st}]\n  signals:\n    - {name: stop_button}\n";
+  cfg = config::load_config_string(yaml, dir + "/x.yaml");
+  Rig r(cfg);
+  PlcEngine plc(cfg);
+  r.loop.attach_plc(&plc);
+  plc.start();
+  ASSERT_TRUE(r.enable());
+  ASSERT_EQ(plc.force("stop_button", "TRUE"), "");
+  r.step(2);
+  EXPECT_EQ(r.loop.status().state, MachineState::kEstop);
+  EXPECT_EQ(r.loop.status().plc_cause.action, PlcAction::kEstop);
+  std::size_t mark = r.events.size();
+  r.loop.post({CommandKind::kReset});
+  r.step(300);
+  EXPECT_TRUE(refused(r, CommandKind::kReset, mark));
+  EXPECT_EQ(r.loop.status().state, MachineState::kEstop);
+  ASSERT_EQ(plc.unforce("stop_button"), "");
+  // A memory signal keeps its forced value after unforce until written: clear it.
+  ASSERT_EQ(plc.force("stop_button", "FALSE"), "");
+  r.step(2);
+  r.loop.post({CommandKind::kReset});
+  r.step(30);
+  EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+  plc.stop();
+}
+
+TEST(PlcLoop, NoAllocationInACycleWithThePlc) {
+  PlcRig p;
+  Rig& r = p.rig;
+  ASSERT_TRUE(r.enable());
+  r.step(100);
+  p.plc.sim_plant()->set_door_open(true);
+  std::size_t allocs = 0;
+  {
+    test::AllocGuard g;
+    for (int i = 0; i < 200; ++i) r.loop.cycle();
+    p.plc.sim_plant()->set_door_open(false);
+    for (int i = 0; i < 200; ++i) r.loop.cycle();
+    allocs = g.counts().total();
+  }
+  EXPECT_EQ(allocs, 0U);
+  EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+}
+
+}  // namespace
+}  // namespace contour::daemon
