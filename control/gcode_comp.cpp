@@ -14,8 +14,11 @@
 namespace contour::control::gcode_detail {
 
 namespace {
-constexpr double kPi = std::numbers::pi;
-constexpr double kHalfPi = std::numbers::pi / 2.0;
+// LinuxCNC computes these angles with long double pi (M_PIl, M_PI_2l) and stores the results
+// in doubles; the same arithmetic here keeps nearly straight compensated arcs identical to the
+// last bit (their centres are ill-conditioned).
+constexpr long double kPi = 3.141592653589793238462643383279502884L;
+constexpr long double kHalfPi = kPi / 2.0L;
 constexpr double kConcave = 0.05;  // LinuxCNC TOLERANCE_CONCAVE_CORNER, rad
 constexpr double kEqual = 0.0001;  // LinuxCNC TOLERANCE_EQUAL
 
@@ -77,11 +80,11 @@ double Interpreter::find_turn(double x1, double y1, double cx, double cy, int tu
   double alpha = std::atan2(y1 - cy, x1 - cx);
   double beta = std::atan2(y2 - cy, x2 - cx);
   if (turn > 0) {
-    if (beta <= alpha) beta += 2.0 * kPi;
-    return (beta - alpha) + (turn - 1) * (2.0 * kPi);
+    if (beta <= alpha) beta = static_cast<double>(beta + 2 * kPi);
+    return static_cast<double>((beta - alpha) + (turn - 1) * (2 * kPi));
   }
-  if (alpha <= beta) alpha += 2.0 * kPi;
-  return (beta - alpha) + (turn + 1) * (2.0 * kPi);
+  if (alpha <= beta) alpha = static_cast<double>(alpha + 2 * kPi);
+  return static_cast<double>((beta - alpha) + (turn + 1) * (2 * kPi));
 }
 
 void Interpreter::enqueue_straight(bool feed, double dx, double dy, double dz, double x, double y, double z) {
@@ -238,7 +241,7 @@ void Interpreter::convert_straight_comp1(int move, double px, double py, double 
   if (distance <= radius)
     fail(blk_.g_cols[gm::kMotion] ? blk_.g_cols[gm::kMotion] : 1,
          "cutter compensation entry move is not longer than the tool radius");
-  const double alpha = std::atan2(py - cy, px - cx) + (side == CompSide::kLeft ? kPi / 2.0 : -kPi / 2.0);
+  const double alpha = static_cast<double>(std::atan2(py - cy, px - cx) + (side == CompSide::kLeft ? kPi / 2.0L : -kPi / 2.0L));
   const double end_x = px + radius * std::cos(alpha);
   const double end_y = py + radius * std::sin(alpha);
   set_endpoint(cx, cy);
@@ -265,13 +268,13 @@ void Interpreter::convert_straight_comp2(int move, double px, double py, double 
     double alpha = std::atan2(py - opy, px - opx);
     double beta = 0, gamma = 0;
     if (side == CompSide::kLeft) {
-      if (theta < alpha) theta += 2.0 * kPi;
-      beta = (theta - alpha) - kHalfPi;
-      gamma = kHalfPi;
+      if (theta < alpha) theta = static_cast<double>(theta + 2 * kPi);
+      beta = static_cast<double>((theta - alpha) - kHalfPi);
+      gamma = static_cast<double>(kHalfPi);
     } else {
-      if (alpha < theta) alpha += 2.0 * kPi;
-      beta = (alpha - theta) - kHalfPi;
-      gamma = -kHalfPi;
+      if (alpha < theta) alpha = static_cast<double>(alpha + 2 * kPi);
+      beta = static_cast<double>((alpha - theta) - kHalfPi);
+      gamma = static_cast<double>(-kHalfPi);
     }
     end_x = px + radius * std::cos(alpha + gamma);
     end_y = py + radius * std::sin(alpha + gamma);
@@ -299,7 +302,7 @@ void Interpreter::convert_straight_comp2(int move, double px, double py, double 
     } else if (concave) {
       if (qc_.empty() || qc_.front().type != Queued::Type::kArc) {
         // line -> line: shorten the previous move
-        const double halfcorner = (beta + kPi) / 2.0;
+        const double halfcorner = static_cast<double>((beta + kPi) / 2.0L);
         if (halfcorner == 0.0) fail(col, "cutter compensation: zero-degree inside corner");
         const double retreat = radius / std::tan(halfcorner);
         mid_x = cx + retreat * std::cos(theta + gamma);
@@ -310,7 +313,7 @@ void Interpreter::convert_straight_comp2(int move, double px, double py, double 
         const Queued prev = qc_.front();
         const double oldrad = std::hypot(prev.center2 - prev.end2, prev.center1 - prev.end1);
         const double base_dir = std::atan2(py - opy, px - opx);
-        const double th = prev.turn > 0 ? base_dir + kHalfPi : base_dir - kHalfPi;
+        const double th = static_cast<double>(prev.turn > 0 ? base_dir + kHalfPi : base_dir - kHalfPi);
         const double phi = std::atan2(prev.center2 - opy, prev.center1 - opx);
         const double oldrad_uncomp = tool_inside_arc(side, prev.turn) ? oldrad + radius : oldrad - radius;
         const double a = th - phi;
@@ -320,12 +323,12 @@ void Interpreter::convert_straight_comp2(int move, double px, double py, double 
           const double l = (d - radius) / oldrad;
           if (l > 1.0 || l < -1.0)
             fail(col, "cutter compensation: arc to straight motion makes a corner the tool cannot fit without gouging");
-          angle = prev.turn > 0 ? -std::acos(l) + th + kPi : std::acos(l) + th + kPi;
+          angle = static_cast<double>(prev.turn > 0 ? -std::acos(l) + th + kPi : std::acos(l) + th + kPi);
         } else {
           const double l = (d + radius) / oldrad;
           if (l > 1.0 || l < -1.0)
             fail(col, "cutter compensation: arc to straight motion makes a corner the tool cannot fit without gouging");
-          angle = prev.turn > 0 ? std::acos(l) + th + kPi : -std::acos(l) + th + kPi;
+          angle = static_cast<double>(prev.turn > 0 ? std::acos(l) + th + kPi : -std::acos(l) + th + kPi);
         }
         mid_x = prev.center1 + oldrad * std::cos(angle);
         mid_y = prev.center2 + oldrad * std::sin(angle);
@@ -405,18 +408,18 @@ void Interpreter::convert_arc_comp2(int move, double ex, double ey, double ez, d
   const double tool_radius = comp_radius_;
   const double arc_radius = std::hypot(centerx - ex, centery - ey);
   double theta = std::atan2(cy - opy, cx - opx);
-  theta = side == CompSide::kLeft ? theta - kHalfPi : theta + kHalfPi;
+  theta = static_cast<double>(side == CompSide::kLeft ? theta - kHalfPi : theta + kHalfPi);
   double delta = std::atan2(centery - opy, centerx - opx);
-  const double alpha = move == g::k3 ? delta - kHalfPi : delta + kHalfPi;
+  const double alpha = static_cast<double>(move == g::k3 ? delta - kHalfPi : delta + kHalfPi);
   double beta = side == CompSide::kLeft ? theta - alpha : alpha - theta;
-  beta = beta > 1.5 * kPi ? beta - 2.0 * kPi : beta < -kHalfPi ? beta + 2.0 * kPi : beta;
+  beta = static_cast<double>(beta > 1.5L * kPi ? beta - 2 * kPi : beta < -kHalfPi ? beta + 2 * kPi : static_cast<long double>(beta));
   double gamma = 0.0;
   if ((side == CompSide::kLeft && move == g::k3) || (side == CompSide::kRight && move == g::k2)) {
     gamma = std::atan2(centery - ey, centerx - ex);
     if (arc_radius <= tool_radius) fail(col, "tool radius not less than the arc radius with cutter compensation");
   } else {
     gamma = std::atan2(ey - centery, ex - centerx);
-    delta = delta + kPi;
+    delta = static_cast<double>(delta + kPi);
   }
   const double new_end_x = ex + tool_radius * std::cos(gamma);
   const double new_end_y = ey + tool_radius * std::sin(gamma);
@@ -424,7 +427,7 @@ void Interpreter::convert_arc_comp2(int move, double ex, double ey, double ez, d
     // concave
     if (qc_.empty() || qc_.front().type != Queued::Type::kArc) {
       // line -> arc
-      const double ccy = arc_radius * std::sin(beta - kHalfPi);
+      const double ccy = static_cast<double>(arc_radius * std::sin(beta - kHalfPi));
       double angle = 0.0;
       double dist = 0.0;
       if (tool_inside_arc(side, turn)) {
@@ -438,7 +441,7 @@ void Interpreter::convert_arc_comp2(int move, double ex, double ey, double ez, d
         const double l = (ccy - tool_radius) / dist;
         if (l > 1.0 || l < -1.0)
           fail(col, "cutter compensation: arc move in a concave corner cannot be reached by the tool without gouging");
-        angle = turn > 0 ? theta + kPi - std::asin(l) : theta + kPi + std::asin(l);
+        angle = static_cast<double>(turn > 0 ? theta + kPi - std::asin(l) : theta + kPi + std::asin(l));
       }
       move_endpoint_and_flush(centerx + dist * std::cos(angle), centery + dist * std::sin(angle));
     } else {

@@ -179,6 +179,13 @@ void Interpreter::step_line(const Source& src, int line_no) {
   sequence_ = line_no;
   cur_line_ = line_no + 1;
   const std::string& text = src.at(line_no);
+  // After M6/M61 LinuxCNC re-reads the position from the machine before reading the next line:
+  // the program position becomes where the machine is (after G40 that is the compensated point).
+  if (toolchange_refresh_) {
+    toolchange_refresh_ = false;
+    const Eigen::Vector3d p = from_machine(pos_mm_);
+    for (int i = 0; i < 3; ++i) cur_[i] = prog_[i] = p[i];
+  }
   if (static_cast<int>(text.size()) > kMaxLineChars)
     fail(kMaxLineChars + 1, "line too long: " + std::to_string(text.size()) + " characters, at most " +
                                 std::to_string(kMaxLineChars));
@@ -508,6 +515,7 @@ void Interpreter::convert_m() {
     tool_table_[0] = idx == 0 ? ToolData{} : tool_table_[static_cast<std::size_t>(idx)];
     canon_set_tool_number(toolno);
     set_tool_parameters();
+    toolchange_refresh_ = true;
   }
   const int m7 = blk_.m_modes[7];
   if (m7 == 3) {
@@ -548,6 +556,7 @@ void Interpreter::convert_tool_change() {
   current_pocket_ = selected_pocket_;
   tool_table_[0] = t;
   set_tool_parameters();
+  toolchange_refresh_ = true;
 }
 
 void Interpreter::convert_g() {
@@ -1233,9 +1242,10 @@ void Interpreter::arc_data_r(int move, double cx, double cy, double ex, double e
     fail(col, "arc radius " + fmt(abs_r) + " too small to reach the end point (half chord " + fmt(half) + ")");
   if (half / abs_r > 1.0 - kTiny) half = abs_r;
   const double dir = std::atan2(ey - cy, ex - cx);
-  const double theta = ((move == g::k2 && radius > 0) || (move == g::k3 && radius < 0))
-                           ? dir - std::numbers::pi / 2.0
-                           : dir + std::numbers::pi / 2.0;
+  constexpr long double kHalfPiL = 1.570796326794896619231321691639751442L;  // LinuxCNC's M_PI_2l
+  const double theta = static_cast<double>(((move == g::k2 && radius > 0) || (move == g::k3 && radius < 0))
+                                               ? dir - kHalfPiL
+                                               : dir + kHalfPiL);
   const double turn2 = std::asin(half / abs_r);
   const double offset = abs_r * std::cos(turn2);
   ccx = mx + offset * std::cos(theta);

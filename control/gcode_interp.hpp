@@ -400,7 +400,7 @@ class Interpreter {
   bool flood_ = false;
   int control_mode_ = 0;  // 0 continuous (G64), 1 exact path (G61), 2 exact stop (G61.1)
   double control_tolerance_ = 0.0;
-  bool retract_r_plane_ = false;  // G99 (false = G98, old Z)
+  bool retract_r_plane_ = true;  // G99 (LinuxCNC starts in R_PLANE); false = G98, old Z
   double cycle_r_ = 0, cycle_cc_ = 0, cycle_il_ = 0, cycle_p_ = 0, cycle_q_ = 0;
   bool cycle_il_flag_ = false;
   CompSide comp_side_ = CompSide::kOff;
@@ -411,6 +411,7 @@ class Interpreter {
   int current_pocket_ = 0;
   int selected_pocket_ = -1;
   int selected_tool_ = -1;
+  bool toolchange_refresh_ = false;  // re-read the position at the next line (LinuxCNC read_inputs)
 
   // ---- cutter compensation queue
   std::vector<Queued> qc_;

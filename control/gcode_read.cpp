@@ -13,7 +13,7 @@
 namespace contour::control::gcode_detail {
 
 namespace {
-constexpr double kPi = std::numbers::pi;
+constexpr long double kPi = 3.141592653589793238462643383279502884L;  // LinuxCNC's M_PIl
 constexpr double kToleranceEqual = 0.0001;  // LinuxCNC TOLERANCE_EQUAL (EQ/NE)
 
 enum Op {
@@ -608,18 +608,18 @@ double Interpreter::read_unary(int& i) {
     ++i;
     if (i >= n || line_[static_cast<std::size_t>(i)] != '[') fail(col_at(i), "'[' missing after ATAN[...]/");
     const double x = read_real_expression(i);
-    return std::atan2(v, x) * 180.0 / kPi;
+    return static_cast<double>((std::atan2(v, x) * 180.0) / kPi);
   }
   if (name == "abs") return std::abs(v);
   if (name == "acos") {
     if (v < -1.0 || v > 1.0) fail(col, "ACOS argument out of range [-1, 1]");
-    return std::acos(v) * 180.0 / kPi;
+    return static_cast<double>((std::acos(v) * 180.0) / kPi);
   }
   if (name == "asin") {
     if (v < -1.0 || v > 1.0) fail(col, "ASIN argument out of range [-1, 1]");
-    return std::asin(v) * 180.0 / kPi;
+    return static_cast<double>((std::asin(v) * 180.0) / kPi);
   }
-  if (name == "cos") return std::cos(v * kPi / 180.0);
+  if (name == "cos") return static_cast<double>(std::cos((v * kPi) / 180.0L));
   if (name == "exp") return std::exp(v);
   if (name == "fix") return std::floor(v);
   if (name == "fup") return std::ceil(v);
@@ -631,12 +631,12 @@ double Interpreter::read_unary(int& i) {
     if (!(std::abs(v) < 2e9)) fail(col, "ROUND argument out of range");
     return static_cast<double>(static_cast<int>(v + (v < 0.0 ? -0.5 : 0.5)));
   }
-  if (name == "sin") return std::sin(v * kPi / 180.0);
+  if (name == "sin") return static_cast<double>(std::sin((v * kPi) / 180.0L));
   if (name == "sqrt") {
     if (v < 0.0) fail(col, "SQRT of a negative number");
     return std::sqrt(v);
   }
-  return std::tan(v * kPi / 180.0);
+  return static_cast<double>(std::tan((v * kPi) / 180.0L));
 }
 
 std::string Interpreter::read_name(int& i) {
@@ -963,8 +963,8 @@ void Interpreter::check_other_codes() {
     if ((motion == g::k2 || motion == g::k3) && pv < 1) bad('p', "P value (turns) must be 1 or more with G2/G3");
   }
   if (blk_.q_number != -1.0 && motion != g::k83 && motion != g::k73 && m0 != g::k10 &&
-      blk_.g_modes[gm::kControl] != g::k64)
-    bad('q', "Q word with no G10, G64, G73 or G83 to use it");
+      blk_.g_modes[gm::kControl] != g::k64 && blk_.m_modes[6] != 61)
+    bad('q', "Q word with no G10, G64, G73, G83 or M61 to use it");
   if (blk_.g_modes[gm::kControl] == g::k64 && blk_['q'].set)
     bad('q', "G64 Q (naive CAM segment merging) is not supported: contourd's planner blends within G64 P");
   if (blk_['r'].set && motion != g::k2 && motion != g::k3 && !cycle && cc != g::k41_1 &&

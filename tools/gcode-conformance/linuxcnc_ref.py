@@ -168,7 +168,10 @@ def main():
         print('END -1 0 cannot load tool table ' + a.tbl)
         return 2
     canon = Canon(a.var, read_tbl(a.tbl), a.block_delete)
-    result, line = gcode.parse(a.program, canon, 'G21', '')
+    # G21: contourd's programs start in mm. F0: rs274 and a real machine start with feed 0 (the
+    # module alone would start at 1, accepting a G1 before any F word).
+    result, line = gcode.parse(a.program, canon, 'G21', 'F0')
+    canon.out = [l for l in canon.out if not l.startswith('0 FEEDRATE')]
     for l in canon.out:
         print(l)
     status = 0 if result <= gcode.MIN_ERROR else result
