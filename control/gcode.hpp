@@ -131,6 +131,10 @@ struct Message {
   int line = 0;
   std::string source;
   std::string text;
+  // Where it falls in the block stream: the number of blocks already in `out` when the message
+  // was produced, in the parse_line/finish/mdi call that produced it (show it when the block at
+  // that index starts; LinuxCNC issues a message before the moves of its line).
+  std::size_t out_index = 0;
 };
 
 // The interpreter's state at a point of the program: for run-from-line (the state at the start

@@ -186,7 +186,7 @@ void Interpreter::canon_user_m(int m, double p, double q) {
 void Interpreter::canon_message(const std::string& text) {
   if (suppress_) return;
   messages_.push_back(Message{Message::Kind::kMsg, sequence_,
-                              sources_[static_cast<std::size_t>(cur_source_)].name, text});
+                              sources_[static_cast<std::size_t>(cur_source_)].name, text, out_->size()});
 }
 
 // ---- enqueue_*: immediate unless cutter compensation holds moves back

@@ -59,6 +59,7 @@ Interpreter::Interpreter(ProgramSetup setup, MachineContext machine, std::string
   sources_.push_back(Source{std::move(file_name), {}, 1, true, false, false});
   frames_.emplace_back();
   init_named_parameters();
+  params_[kParamDebug] = 1.0;  // LinuxCNC's init enables (DEBUG,...) output
   // LinuxCNC's init: active system, its origin and rotation, the G92 offset if applied.
   origin_index_ = static_cast<int>(params_[kParamCoordSystem] + 0.0001);
   if (origin_index_ < 1 || origin_index_ > 9) {
@@ -382,7 +383,7 @@ void Interpreter::convert_comment(const std::string& comment, int col) {
   }
   const auto add = [&](Message::Kind k, const std::string& t) {
     if (suppress_) return;
-    messages_.push_back(Message{k, sequence_, sources_[static_cast<std::size_t>(cur_source_)].name, t});
+    messages_.push_back(Message{k, sequence_, sources_[static_cast<std::size_t>(cur_source_)].name, t, out_->size()});
   };
   if (starts("debug,")) {
     const std::string e = expand_debug(body.substr(6), col);
@@ -689,7 +690,8 @@ void Interpreter::convert_tool_length_offset(int code) {
     const bool axes = blk_['x'].set || blk_['y'].set || blk_['z'].set;
     if (blk_['h'].set && axes) fail(col, "G43.2 with both H and axis words");
     if (!blk_['h'].set && !axes) fail(col, "G43.2 without H or axis words");
-    const int idx = find_tool_index(blk_.h_number < 0 ? 0 : blk_.h_number, word_col('h'));
+    // LinuxCNC looks H up even when it is absent (-1): G43.2 with axis words fails there too.
+    const int idx = find_tool_index(blk_.h_number, blk_['h'].set ? word_col('h') : col);
     for (int i = 0; i < 3; ++i) off[i] = tool_off_[i];
     if (blk_['h'].set) {
       const ToolData& t = tool_table_[static_cast<std::size_t>(idx)];

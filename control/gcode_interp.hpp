@@ -409,7 +409,7 @@ class Interpreter {
   bool comp_firstmove_ = true;
   bool arc_not_allowed_ = false;
   int current_pocket_ = 0;
-  int selected_pocket_ = -1;
+  int selected_pocket_ = 0;  // LinuxCNC reads the prepared pocket at start: 0, so M6 without T unloads
   int selected_tool_ = -1;
   bool toolchange_refresh_ = false;  // re-read the position at the next line (LinuxCNC read_inputs)
 
