@@ -965,8 +965,6 @@ void Interpreter::check_other_codes() {
   if (blk_.q_number != -1.0 && motion != g::k83 && motion != g::k73 && m0 != g::k10 &&
       blk_.g_modes[gm::kControl] != g::k64 && blk_.m_modes[6] != 61)
     bad('q', "Q word with no G10, G64, G73, G83 or M61 to use it");
-  if (blk_.g_modes[gm::kControl] == g::k64 && blk_['q'].set)
-    bad('q', "G64 Q (naive CAM segment merging) is not supported: contourd's planner blends within G64 P");
   if (blk_['r'].set && motion != g::k2 && motion != g::k3 && !cycle && cc != g::k41_1 &&
       cc != g::k42_1 && m0 != g::k10)
     bad('r', "R word with no G2, G3, G10 or canned cycle to use it");

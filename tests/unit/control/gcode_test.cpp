@@ -165,7 +165,7 @@ TEST(Gcode, ErrorsNameFileLineColumnAndWhat) {
       {"G1 X1 F100\nO100 sub", "t.ngc:2:1: end of file t.ngc inside o100"},
       {"#1=5 G1 X#1", "t.ngc:1:6: G1 with zero feed rate"},
       {"G93", "t.ngc:1:1: G93 (inverse time feed) is not supported"},
-      {"G64 P0.01 Q0.01", "t.ngc:1:11: G64 Q"},
+      {"G64 P0.01 Q0.01 Q2", "t.ngc:1:17: word 'Q' appears twice"},
       {"G1 A10 F100", "t.ngc:1:4: axis A is not configured"},
       {"M98", "t.ngc:1:1: unknown M code M98"},
       {"G0 G1 X1", "t.ngc:1:4: two G codes of the same modal group"},
