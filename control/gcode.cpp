@@ -65,6 +65,7 @@ ModalState GcodeParser::modal_state() const { return impl_->modal_state(); }
 const std::optional<ModalState>& GcodeParser::resume_state() const { return impl_->resume_state(); }
 std::vector<Message> GcodeParser::take_messages() { return impl_->take_messages(); }
 const std::string& GcodeParser::source_name(int source) const { return impl_->source_name(source); }
+std::size_t GcodeParser::retained_lines() const { return impl_->retained_lines(); }
 
 Eigen::Vector3d work_coordinates(const Block& b, const Eigen::Vector3d& m) {
   double x = m.x() - b.work_offset_mm.x() - b.tool_offset_mm.x();

@@ -121,6 +121,9 @@ struct ProgramSetup {
   bool block_delete = false;          // '/' switch: on = lines starting with '/' are skipped
   bool require_program_end = false;   // end of input without M2/M30/'%' is an error (LinuxCNC)
   int run_from_line = 0;              // > 0: emit nothing before this line (see resume_state())
+  // > 0: refuse a program once it has executed this many lines (loops that never end; the fuzz
+  // harness sets it). 0: no limit, as LinuxCNC.
+  long max_executed_lines = 0;
 };
 
 // A message from the program: (MSG,...), (DEBUG,...) with #parameters expanded, (PRINT,...),
@@ -217,6 +220,9 @@ class GcodeParser {
   // Messages since the last call, in program order.
   std::vector<Message> take_messages();
   [[nodiscard]] const std::string& source_name(int source) const;
+  // Program lines held in memory (for jumps back: loops, calls, subroutine bodies); stays small
+  // for a program without loops and subroutines however long it is.
+  [[nodiscard]] std::size_t retained_lines() const;
 
  private:
   std::unique_ptr<gcode_detail::Interpreter> impl_;

@@ -180,6 +180,8 @@ void Interpreter::step_line(const Source& src, int line_no) {
   sequence_ = line_no;
   cur_line_ = line_no + 1;
   const std::string& text = src.at(line_no);
+  if (setup_.max_executed_lines > 0 && ++executed_lines_ > setup_.max_executed_lines)
+    fail(1, "program executed more than " + std::to_string(setup_.max_executed_lines) + " lines (a loop that does not end?)");
   // After M6/M61 LinuxCNC re-reads the position from the machine before reading the next line:
   // the program position becomes where the machine is (after G40 that is the compensated point).
   if (toolchange_refresh_) {

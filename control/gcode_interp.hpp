@@ -187,6 +187,11 @@ class Interpreter {
   [[nodiscard]] const std::optional<ModalState>& resume_state() const { return resume_state_; }
   std::vector<Message> take_messages();
   [[nodiscard]] const std::string& source_name(int id) const;
+  [[nodiscard]] std::size_t retained_lines() const {
+    std::size_t n = 0;
+    for (const auto& s : sources_) n += s.lines.size();
+    return n;
+  }
 
  private:
   // ---- driver (gcode_interp.cpp)
@@ -353,6 +358,7 @@ class Interpreter {
   int cur_line_ = 1;      // next line number to read in cur_source_
   int sequence_ = 0;      // line number of the line being executed
   int pushed_lines_ = 0;  // main program lines pushed so far
+  long executed_lines_ = 0;
   bool percent_seen_content_ = false;
   bool percent_flag_ = false;
   std::map<std::string, Label> offset_map_;
