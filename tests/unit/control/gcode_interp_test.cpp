@@ -5,6 +5,7 @@
 // the program-level comparison with LinuxCNC itself is tests/conformance.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <optional>
@@ -417,4 +418,36 @@ TEST(GcodeInterp, MachineContextDrivesOffsetsAndTools) {
   EXPECT_EQ(m[0].seg.end, Vector3d(0, 40, 12));
   EXPECT_EQ(m[0].coord_system, 2);
   EXPECT_NEAR(m[0].tool_offset_mm.z(), 12, 1e-12);
+}
+
+// Issue 19: a 1,000,000-line program without loops or subroutines streams in bounded memory (the
+// interpreter keeps no program lines); one with a loop keeps only the loop's lines.
+TEST(GcodeInterp, MillionLineProgramStreamsWithoutKeepingLines) {
+  GcodeParser p(base(), "long.ngc");
+  std::vector<Block> out;
+  std::size_t blocks = 0;
+  std::size_t most_retained = 0;
+  std::string line;
+  for (int i = 0; i < 1000000; ++i) {
+    line = "N" + std::to_string(i) + " G1 X" + std::to_string(i % 100) + " Y" + std::to_string(i % 7) + " F1000";
+    p.parse_line(line, out);
+    blocks += out.size();
+    out.clear();
+    if (i % 1000 == 0) most_retained = std::max(most_retained, p.retained_lines());
+  }
+  p.parse_line("M2", out);
+  EXPECT_GE(blocks, 990000u);
+  EXPECT_EQ(most_retained, 0u);
+  GcodeParser q(base(), "loop.ngc");
+  out.clear();
+  q.parse_line("#1=0", out);
+  q.parse_line("o1 while [#1 LT 3]", out);
+  q.parse_line("G1 X#1 F100", out);
+  q.parse_line("#1=[#1+1]", out);
+  const std::size_t inside = q.retained_lines();  // the jump back can reach these
+  q.parse_line("o1 endwhile", out);
+  EXPECT_EQ(motions(out).size(), 3u);
+  EXPECT_GT(inside, 0u);
+  EXPECT_LE(inside, 4u);
+  EXPECT_EQ(q.retained_lines(), 0u);  // released once the loop is done
 }
