@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <numbers>
 
 namespace contour::control::gcode_detail {
@@ -28,11 +27,7 @@ void rotate(double& x, double& y, double theta_deg) {
   y = yy;
 }
 
-std::string fmt(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.4f", v);
-  return buf;
-}
+std::string fmt(double v) { return format_fixed(v, 4); }
 
 bool is_cycle(int motion) { return motion == g::k73 || (motion >= g::k81 && motion <= g::k89); }
 }  // namespace
@@ -409,7 +404,7 @@ void Interpreter::convert_comment(const std::string& comment, int col) {
 // (DEBUG,...) expansion: #n and #<name> by value, %d %f %.Nf formats (LinuxCNC's rules).
 std::string Interpreter::expand_debug(const std::string& text, int col) const {
   std::string out;
-  std::string format = "%lf";
+  int decimals = 6;  // "%lf"
   std::size_t i = 0;
   const std::size_t n = text.size();
   while (i < n) {
@@ -417,14 +412,14 @@ std::string Interpreter::expand_debug(const std::string& text, int col) const {
     if (c == '%') {
       ++i;
       if (i < n && text[i] == 'd') {
-        format = "%.0f";
+        decimals = 0;  // "%d" prints "%.0f"
         ++i;
       } else if (i < n && text[i] == 'f') {
-        format = "%.4f";
+        decimals = 4;
         ++i;
       } else if (i < n && text[i] == '.') {
         if (i + 2 < n && std::isdigit(static_cast<unsigned char>(text[i + 1])) && text[i + 2] == 'f') {
-          format = std::string("%.") + text[i + 1] + "f";
+          decimals = text[i + 1] - '0';
           i += 3;
         } else {
           out += '.';
@@ -464,9 +459,8 @@ std::string Interpreter::expand_debug(const std::string& text, int col) const {
       }
       if (found) {
         if (std::abs(value) < 0.0001) value = 0.0;
-        char buf[64];
-        const int k = std::snprintf(buf, sizeof buf, format.c_str(), value);
-        out += (k < 0 || k >= 30) ? "######" : buf;
+        const std::string v = format_fixed(value, decimals);
+        out += v.size() >= 30 ? "######" : v;
       } else {
         out += "######";
       }

@@ -4,7 +4,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
-#include <cstdio>
+#include <system_error>
 
 namespace contour::control {
 
@@ -162,13 +162,21 @@ void apply_var_file(MachineContext& m, const std::map<int, double>& vars) {
   if (s < 1 || s > 9) m.parameters[kParamCoordSystem] = 1.0;  // as LinuxCNC's init does
 }
 
+std::string format_fixed(double v, int decimals) {
+  char buf[400];  // fixed notation of any finite double with <= 9 decimals fits
+  const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::fixed, decimals);
+  if (r.ec != std::errc()) return std::isnan(v) ? "nan" : (v < 0 ? "-inf" : "inf");
+  return std::string(buf, r.ptr);
+}
+
 std::string format_var_file(const MachineContext& m) {
   std::string out;
-  char buf[64];
   for (int k : m.persistent) {
     if (k < 1 || k >= kParameterCount) continue;
-    std::snprintf(buf, sizeof buf, "%d\t%f\n", k, m.parameters[static_cast<std::size_t>(k)]);
-    out += buf;
+    out += std::to_string(k);
+    out += '\t';
+    out += format_fixed(m.parameters[static_cast<std::size_t>(k)], 6);
+    out += '\n';
   }
   return out;
 }
@@ -252,14 +260,22 @@ std::vector<ToolData> parse_tool_table(std::string_view text, const std::string&
 
 std::string format_tool_table(const std::vector<ToolData>& tools) {
   std::string out;
-  char buf[64];
+  const auto left3 = [](int v) {  // "%-3d"
+    std::string s = std::to_string(v);
+    if (s.size() < 3) s.append(3 - s.size(), ' ');
+    return s;
+  };
   for (const auto& t : tools) {
-    std::snprintf(buf, sizeof buf, "T%-3d P%-3d", t.number, t.pocket);
-    out += buf;
-    const auto item = [&](double v, char letter) {
+    out += 'T';
+    out += left3(t.number);
+    out += " P";
+    out += left3(t.pocket);
+    const auto item = [&](double v, char letter) {  // " %c%+f"
       if (v == 0.0) return;
-      std::snprintf(buf, sizeof buf, " %c%+f", letter, v);
-      out += buf;
+      out += ' ';
+      out += letter;
+      if (!std::signbit(v)) out += '+';
+      out += format_fixed(v, 6);
     };
     item(t.diameter_mm, 'D');
     static constexpr char kAxes[] = "XYZABCUVW";
@@ -267,8 +283,8 @@ std::string format_tool_table(const std::vector<ToolData>& tools) {
     item(t.front_angle_deg, 'I');
     item(t.back_angle_deg, 'J');
     if (t.orientation != 0) {
-      std::snprintf(buf, sizeof buf, " Q%d", t.orientation);
-      out += buf;
+      out += " Q";
+      out += std::to_string(t.orientation);
     }
     out += " ;";
     out += t.comment;

@@ -91,6 +91,10 @@ struct MachineContext {
 // Parameters LinuxCNC always writes to the .var file (5161..5390, its _required_parameters).
 [[nodiscard]] const std::vector<int>& required_parameters();
 
+// printf's "%.<decimals>f" without <cstdio> (control/ stays free of stdio): fixed notation,
+// rounded to nearest. Used by the text formats and the interpreter's messages.
+[[nodiscard]] std::string format_fixed(double v, int decimals);
+
 // `.var` text: one "number value" pair per line, numbers strictly increasing (LinuxCNC refuses a
 // file out of order), 1 <= number < kParameterCount. Blank lines are allowed; anything else is an
 // error naming the line.

@@ -3,7 +3,6 @@
 // does: a parameter set on a line is not visible to reads on the same line.
 #include <algorithm>
 #include <charconv>
-#include <cstdio>
 #include <functional>
 #include <cmath>
 #include <numbers>
@@ -332,9 +331,10 @@ void Interpreter::read_one_item(int& i) {
       break;
   }
   if (static_cast<unsigned char>(c) < ' ' || static_cast<unsigned char>(c) > 'z') {
-    char buf[16];
-    std::snprintf(buf, sizeof buf, "\\%03o", static_cast<unsigned>(static_cast<unsigned char>(c)));
-    fail(col, std::string("bad character '") + buf + "'");
+    const unsigned u = static_cast<unsigned char>(c);  // "\\%03o"
+    const std::string oct{'\\', static_cast<char>('0' + ((u >> 6) & 7)), static_cast<char>('0' + ((u >> 3) & 7)),
+                          static_cast<char>('0' + (u & 7))};
+    fail(col, std::string("bad character '") + oct + "'");
   }
   fail(col, std::string("unexpected character '") + c + "'");
 }
