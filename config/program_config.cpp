@@ -1,5 +1,8 @@
 #include "config/program_config.hpp"
 
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 
 namespace contour::config {
@@ -14,6 +17,39 @@ std::array<double, 3> vec3(Section& s, const std::string& key) {
   const auto n = s.numbers(key, 3, 3);
   for (std::size_t i = 0; i < 3 && i < n.size(); ++i) v[i] = n[i];
   return v;
+}
+
+std::vector<std::string> subroutine_dirs(Section& s) {
+  std::vector<std::string> dirs;
+  const std::string key = "subroutine_path";
+  s.accept(key);
+  if (!s.has(key)) return dirs;
+  const YAML::Node n = s.node()[key];
+  std::vector<YAML::Node> items;
+  if (n.IsScalar()) {
+    items.push_back(n);
+  } else if (n.IsSequence()) {
+    for (const auto& i : n) items.push_back(i);
+  } else {
+    s.error(key, "expected a directory or a list of directories");
+    return dirs;
+  }
+  for (const auto& i : items) {
+    if (!i.IsScalar()) {
+      s.error(key, "expected a directory name");
+      continue;
+    }
+    const std::string d = i.as<std::string>();
+    std::error_code ec;
+    if (d.empty() || d[0] != '/') {
+      s.error(key, "'" + d + "' is not an absolute path");
+    } else if (!std::filesystem::is_directory(d, ec)) {
+      s.error(key, "'" + d + "' is not a directory");
+    } else {
+      dirs.push_back(d);
+    }
+  }
+  return dirs;
 }
 }  // namespace
 
@@ -39,6 +75,9 @@ ProgramConfig parse_program(Section& s) {
   c.start_mm = vec3(s, "start_mm");
   c.rapid_mm_min = s.number("rapid_mm_min", c.rapid_mm_min, 1.0, 1e6);
   c.arc_tolerance_mm = s.number("arc_tolerance_mm", c.arc_tolerance_mm, 1e-6, 1.0);
+  c.arc_tolerance_inch = s.number("arc_tolerance_inch", c.arc_tolerance_inch, 4e-8, 0.04);
+  c.subroutine_path = subroutine_dirs(s);
+  c.require_program_end = s.boolean("require_program_end", c.require_program_end);
   s.finish();
   return c;
 }
@@ -53,9 +92,37 @@ control::ProgramSetup to_program_setup(const ProgramConfig& p, const Interpolato
   st.start_mm = v(p.start_mm);
   st.rapid_mm_min = p.rapid_mm_min;
   st.arc_tolerance_mm = p.arc_tolerance_mm;
+  st.arc_tolerance_inch = p.arc_tolerance_inch;
   st.default_blend = i.blend;
   st.default_tolerance_mm = i.tolerance_um * 1e-3;
+  st.require_program_end = p.require_program_end;
+  if (!p.subroutine_path.empty()) st.load_subroutine = make_subroutine_loader(p.subroutine_path);
   return st;
+}
+
+std::function<std::optional<std::string>(const std::string&)> make_subroutine_loader(
+    std::vector<std::string> dirs) {
+  return [dirs = std::move(dirs)](const std::string& name) -> std::optional<std::string> {
+    const std::string file = name + ".ngc";
+    // Names come from the program: a path in them must not reach outside the directories.
+    if (file.find('/') != std::string::npos || name.empty() || name[0] == '.') return std::nullopt;
+    const auto read = [](const std::filesystem::path& p) -> std::optional<std::string> {
+      std::ifstream in(p, std::ios::binary);
+      if (!in) return std::nullopt;
+      std::ostringstream ss;
+      ss << in.rdbuf();
+      return ss.str();
+    };
+    for (const auto& d : dirs) {
+      std::error_code ec;
+      const std::filesystem::path direct = std::filesystem::path(d) / file;
+      if (std::filesystem::is_regular_file(direct, ec)) return read(direct);
+      for (std::filesystem::recursive_directory_iterator it(d, ec), end; !ec && it != end; it.increment(ec)) {
+        if (it->is_regular_file(ec) && it->path().filename() == file) return read(it->path());
+      }
+    }
+    return std::nullopt;
+  };
 }
 
 }  // namespace contour::config
