@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -81,6 +82,51 @@ Program load_program(const std::string& path) {
   return p;
 }
 
+// A contourd telemetry CSV's reference (rx_mm, ry_mm, rz_mm), from the first READY/RUNNING row
+// (state >= 2) on: one point per cycle, velocity by differences.
+std::vector<control::ReferencePoint> load_reference_csv(const std::string& path, double period_s) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open");
+  std::string line;
+  if (!std::getline(in, line)) throw std::runtime_error(path + ": empty");
+  std::vector<std::string> head;
+  {
+    std::stringstream ss(line);
+    std::string f;
+    while (std::getline(ss, f, ',')) head.push_back(f);
+  }
+  auto col = [&](const char* name) {
+    for (std::size_t i = 0; i < head.size(); ++i) {
+      if (head[i] == name) return i;
+    }
+    throw std::runtime_error(path + ": no column " + name);
+  };
+  const std::size_t cs = col("state"), cx = col("rx_mm"), cy = col("ry_mm"), cz = col("rz_mm");
+  std::vector<control::ReferencePoint> ref;
+  int row = 1;
+  while (std::getline(in, line)) {
+    ++row;
+    std::vector<std::string> c;
+    std::stringstream ss(line);
+    std::string f;
+    while (std::getline(ss, f, ',')) c.push_back(f);
+    if (c.size() <= std::max({cs, cx, cy, cz})) {
+      throw std::runtime_error(path + ":" + std::to_string(row) + ": short row");
+    }
+    try {
+      if (std::stoi(c[cs]) < 2) continue;
+      control::ReferencePoint p;
+      p.r_mm = Vec3(std::stod(c[cx]), std::stod(c[cy]), std::stod(c[cz]));
+      if (!ref.empty()) p.v_mm_s = (p.r_mm - ref.back().r_mm) / period_s;
+      ref.push_back(p);
+    } catch (const std::exception&) {
+      throw std::runtime_error(path + ":" + std::to_string(row) + ": not a number");
+    }
+  }
+  if (ref.size() < 3) throw std::runtime_error(path + ": fewer than 3 reference rows");
+  return ref;
+}
+
 struct Sample {
   double t_s;
   Vec3 r, p;
@@ -117,6 +163,11 @@ struct RunSetup {
   double blu_mm = 0.0005;
   bool quantise = true;
   bool keep_trace = false;
+  // The daemon's control stage (daemon/servo_loop.cpp control_step): v = K u, |v| <= v_max,
+  // v within v_actual +- a_max tau; the drives get the clamped v. command_applied: the controller
+  // is told (ServoController::command_applied, the wiring proposed for the daemon).
+  bool daemon_clamps = false;
+  bool command_applied = false;
 };
 
 RunResult run_one(const RunSetup& s, config::ControllerType type) {
@@ -165,9 +216,25 @@ RunResult run_one(const RunSetup& s, config::ControllerType type) {
     if (ce.status == control::ContourStatus::kLagOverflow) ++res.lag_overflows;
     Vec3 u;
     ctrl.update(r, p_hat, ce, v, u);
-    for (std::size_t i = 0; i < 3; ++i) drive[i].step(u[static_cast<Eigen::Index>(i)]);
     // The velocity command a velocity-mode drive would get (v = K u, mm/s).
-    chatter.add({dp[0].gain_per_s * u[0], dp[1].gain_per_s * u[1], dp[2].gain_per_s * u[2]});
+    std::array<double, 3> v_cmd{};
+    for (std::size_t i = 0; i < 3; ++i) {
+      const auto e = static_cast<Eigen::Index>(i);
+      double vi = dp[i].gain_per_s * u[e];
+      if (s.daemon_clamps) {
+        const auto& ax = cfg.machine.axes[i];
+        const double vmax = ax.max_velocity_mm_min / 60.0;
+        vi = std::clamp(vi, -vmax, vmax);
+        const double dv = ax.max_accel_mm_s2 * ax.drive.tau_s;
+        const double va = drive[i].velocity_mm_s();
+        if (dv > 0.0) vi = std::clamp(vi, va - dv, va + dv);
+        u[e] = vi / dp[i].gain_per_s;
+      }
+      v_cmd[i] = vi;
+    }
+    if (s.command_applied) ctrl.command_applied(u);
+    for (std::size_t i = 0; i < 3; ++i) drive[i].step(u[static_cast<Eigen::Index>(i)]);
+    chatter.add(v_cmd);
 
     if (!p_true.allFinite() || p_true.norm() > 1e6) {
       res.stable = false;
@@ -317,6 +384,8 @@ int run_contour(int argc, char** argv) {
   std::string path, controller = "ccc", config_path, csv, plot, model_name, window_rule;
   double feed_mm_min = 4000.0;
   int delay_cycles = -1, plant_delay_cycles = -1;
+  std::string reference_csv;
+  bool daemon_clamps = false, command_applied = false;
   double settle_s = 1.0, model_blend_ms = -1.0, lowpass_ms = -1.0;
   std::string same_geometry;
   bool compare = false, no_quantise = false, no_delay_comp = false, no_integrator_fix = false;
@@ -340,6 +409,14 @@ int run_contour(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1000.0));
   app.add_option("--same-geometry", same_geometry, "override control.derivative.same_geometry")
       ->check(CLI::IsMember({"never", "ahead", "always"}));
+  app.add_option("--reference-csv", reference_csv,
+                 "replay a recorded reference (contourd telemetry CSV, e.g. from `contour-sim "
+                 "run --csv`: rx_mm, ry_mm, rz_mm from READY on) instead of interpolating --path; "
+                 "--path still gives the programmed path for the contour error");
+  app.add_flag("--daemon-clamps", daemon_clamps,
+               "apply the daemon's velocity and acceleration clamps to the command");
+  app.add_flag("--command-applied", command_applied,
+               "tell the controller the clamped command (ServoController::command_applied)");
   app.add_option("--csv", csv, "write the time series of the chosen controller");
   app.add_option("--plot", plot, "PNG of contour error vs time (gnuplot)");
   app.add_flag("--compare", compare, "run P, PID and CCC; plot them together");
@@ -399,6 +476,7 @@ int run_contour(int argc, char** argv) {
     ref = control::sample_polyline(prog.vertices, feed_mm_s, cfg.machine.period_s);
     sd = std::make_unique<control::SegmentPathDistance>(prog.segments);
   }
+  if (!reference_csv.empty()) ref = load_reference_csv(reference_csv, cfg.machine.period_s);
 
   RunSetup setup;
   setup.cfg = &cfg;
@@ -408,6 +486,8 @@ int run_contour(int argc, char** argv) {
   setup.seg_dist = sd.get();
   setup.delay_cycles = delay_cycles;
   setup.plant_delay_cycles = plant_delay_cycles;
+  setup.daemon_clamps = daemon_clamps || command_applied;
+  setup.command_applied = command_applied;
   setup.settle_s = settle_s;
   setup.blu_mm = 1.0 / cfg.machine.axes[0].counts_per_mm;
   setup.quantise = !no_quantise;
