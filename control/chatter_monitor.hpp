@@ -54,9 +54,10 @@ class ChatterMeter {
 };
 
 // Detector parameters. Defaults (control/CHATTER.md has the measured figures behind them):
-// normal operation with the default derivative filter stays below 2 mm/s RMS over a program and
-// below ~14 mm/s in a 0.1 s window at a Table 2 corner, for less than 0.1 s; the limit cycles of
-// issue 16 run at 24-76 mm/s RMS and 660-970 clamped cycles per second, indefinitely.
+// through the daemon on Table 2 with the default derivative filter a 0.1 s window peaks at
+// 11.6 mm/s at a corner and stays above 5 mm/s for at most 104 ms (never warns); the limit cycles
+// of issue 16 run at 24-76 mm/s RMS and 557-971 clamped cycles per second, indefinitely; the
+// round-1 law (filter off) moves at 14-25 mm/s: warning, never a fault.
 struct ChatterMonitorParams {
   double period_s = 0.001;
   double window_s = 0.1;                  // sliding window (kBlocks blocks)

@@ -153,7 +153,8 @@ struct SimFigures {
 // At rest an axis whose position spans more than this many counts, that clamps at all, or whose
 // command changes by more than this RMS is oscillating. Why 30 mm/s: with the derivative filter
 // off, an axis dithering by one count at rest already changes its command by ~20 mm/s RMS (the
-// unfiltered Cd K BLU / T steps), which is chatter but not a limit cycle; kp = 50 runs at 27-45.
+// unfiltered Cd K BLU / T steps), which is chatter but not a limit cycle; kp = 50 clamps 557-667
+// times per second.
 constexpr double kRestPeakToPeakBlu = 4.0;
 constexpr double kRestChatter_mm_s = 30.0;
 constexpr int kMoveCycles = 60;
