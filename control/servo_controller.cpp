@@ -64,6 +64,8 @@ void ServoController::reset() noexcept {
   eps_prev_.setZero();
   resid_f_.setZero();
   resid_f1_.setZero();
+  u_last_.setZero();
+  applied_pending_ = false;
   d_axis_.setZero();
   d_coup_.setZero();
   first_ = true;
@@ -239,10 +241,14 @@ ServoStatus ServoController::update(const Vec3& r_mm, const Vec3& p_hat_mm,
     if (predictor) model_d_[s].step(u_out[i]);
   }
   u_last_ = u_out;
+  applied_pending_ = true;
   return status;
 }
 
 void ServoController::command_applied(const Vec3& u_applied_mm) noexcept {
+  // Only the command of the update() just made can be corrected (not twice, not after reset()).
+  if (!applied_pending_) return;
+  applied_pending_ = false;
   const bool predictor = p_.delay_compensation && p_.delay_cycles > 0;
   for (int i = 0; i < p_.axes; ++i) {
     const auto s = static_cast<std::size_t>(i);

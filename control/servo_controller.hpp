@@ -157,7 +157,8 @@ class ServoController {
   // The command the drives really got this cycle (mm, same convention as update()'s output), when
   // the caller limited it after update() (the daemon's velocity and acceleration clamps): the
   // drive models (Smith predictor, derivative model blend) then follow the real drives instead of
-  // drifting away from them. Call after update(), before the next predict(). RT: noexcept, O(axes).
+  // drifting away from them. Call after update(), before the next predict(); a call without a
+  // preceding update() (or a second one) is ignored. RT: noexcept, O(axes).
   void command_applied(const Vec3& u_applied_mm) noexcept;
 
   [[nodiscard]] const ServoParams& params() const noexcept { return p_; }
@@ -173,8 +174,9 @@ class ServoController {
   Vec3 resid_f1_ = Vec3::Zero();
   Vec3 resid_f_ = Vec3::Zero();
   Vec3 p_tilde_prev_ = Vec3::Zero();
-  Vec3 u_last_ = Vec3::Zero();
-  ServoTerms terms_{};   // the command the models were stepped with  // F(z)(P_hat - m): the model-blend filter state
+  Vec3 u_last_ = Vec3::Zero();   // the command the models were stepped with
+  bool applied_pending_ = false; // update() ran; command_applied() may still correct it
+  ServoTerms terms_{};           // the last update()'s terms (P, I, D, coupling)
   Vec3 d_axis_ = Vec3::Zero();   // low-passed derivative terms (mm of command)
   Vec3 d_coup_ = Vec3::Zero();
   double a_blend_ = 0.0;         // exp(-T / model_blend_s), 0 when off
