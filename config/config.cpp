@@ -15,6 +15,12 @@ Config parse_root(const YAML::Node& root, const std::string& name) {
       cfg.loop = parse_loop(sec);
     }
     Section machine = top.child("machine");
+    // No silent default machine (issue 16: a file without it used to run the paper's Table 1
+    // machine). config/table1.yaml has that machine written out.
+    if (top.present() && !machine.present()) {
+      diag.error(root, "machine", "missing section: every configuration names its machine (axes, "
+                                  "drives, limits); see config/sim.yaml or config/table1.yaml");
+    }
     cfg.machine = parse_machine(machine, cfg.loop.period_us * 1e-6);
     {
       Section sec = top.child("safety");

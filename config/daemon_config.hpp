@@ -24,6 +24,15 @@ struct SafetyConfig {
   int missed_tpdo_streak = 3;          // consecutive missed TPDOs of one node -> FAULT
   double stop_decel_mm_s2 = 1000.0;    // controlled-stop deceleration along the path
   double jog_max_velocity_mm_min = 3000.0;
+  // Power stages are switched off only at standstill (issue 16): after a controlled stop, a
+  // `disable` or SIGTERM the drives stay enabled with a zero command until every axis' measured
+  // speed has stayed below standstill_velocity_mm_s for standstill_time_s; if that does not happen
+  // within standstill_timeout_s the drives get the CiA 402 quick stop (their own ramp, 0x6085, then
+  // disabled by the drive at standstill: quick stop option code 0x605A) and the log says which axis
+  // still moved.
+  double standstill_velocity_mm_s = 1.0;
+  double standstill_time_s = 0.05;
+  double standstill_timeout_s = 2.0;
 };
 
 struct TelemetryConfig {

@@ -26,6 +26,12 @@ struct AxisFeedback {
   bool enabled = false;        // CiA 402 "operation enabled"
   bool fault = false;          // drive fault bit
   std::uint16_t statusword = 0;
+  int node_id = 0;             // CANopen node-id (0: not a CANopen drive)
+  // Communication events latched by the bus until acknowledge_faults() (CANopen: the master):
+  // the last EMCY error code of this drive (0: none; 0x0000 "error reset" is not latched) and
+  // whether it left NMT operational (boot-up, stopped, pre-operational) while the loop cycled.
+  std::uint16_t emcy_code = 0;
+  bool nmt_lost = false;
 };
 
 // The spindle drive on the same bus (CANopen bus.spindle, or the simulated machine's spindle).

@@ -219,13 +219,15 @@ void CanopenBus::read(BusFeedback& fb) noexcept {
       }
     }
     f.statusword = r.statusword;
+    f.node_id = master_->setup(i).node_id;
+    f.emcy_code = r.emcy_code;
+    f.nmt_lost = r.nmt_lost;
     f.enabled = r.state == co::Cia402State::kOperationEnabled;
-    // The drive's own fault state, or a master-side latch that means the drive can no longer be
-    // trusted (it rebooted behind our back).
+    // The drive's own fault state (a reboot behind our back is nmt_lost: the supervisor names it
+    // as an NMT change, and a reset needs the node operational again).
     f.fault = r.state == co::Cia402State::kFault ||
               r.state == co::Cia402State::kFaultReactionActive ||
-              (r.faults & (static_cast<std::uint8_t>(co::NodeFault::kDriveFault) |
-                           static_cast<std::uint8_t>(co::NodeFault::kUnexpectedBootUp))) != 0;
+              (r.faults & static_cast<std::uint8_t>(co::NodeFault::kDriveFault)) != 0;
   }
   if (spindle_index_ >= 0) {
     const co::NodeRuntime& r = master_->node(static_cast<std::size_t>(spindle_index_));

@@ -153,6 +153,7 @@ void CommandServer::run() {
       for (auto& [id, c] : clients_) {
         // Stop reading a client while it has complete lines waiting (kernel backpressure keeps
         // its input bounded); those lines are served below without waiting for poll.
+        if (!c.streams.empty()) pump_streams(c);  // output drained by a reply's flush
         const bool waiting = c.eof || has_complete_line(c);
         short ev = waiting ? 0 : POLLIN;
         if (!c.out.empty()) ev = static_cast<short>(ev | POLLOUT);
@@ -190,7 +191,13 @@ void CommandServer::run() {
       }
       keep = process_input(c);
       lk.lock();
-      if (keep && (p.revents & POLLOUT)) keep = flush_client(c);
+      if (keep && (p.revents & POLLOUT)) {
+        keep = flush_client(c);
+        if (keep && !c.streams.empty()) {
+          pump_streams(c);  // the client read: refill its output from its sample queue
+          keep = flush_client(c);
+        }
+      }
       if (!keep && !c.overflow) close_client(it);
     }
     drop_idle_clients(Clock::now());
@@ -561,23 +568,145 @@ void CommandServer::emit_notices() {
 }
 
 void CommandServer::subscribe(std::uint64_t client, const std::string& topic) {
+  subscribe(client, topic, StreamOptions{});
+}
+
+void CommandServer::subscribe(std::uint64_t client, const std::string& topic, StreamOptions opt) {
   std::lock_guard lk(mu_);
   auto it = clients_.find(client);
   if (it == clients_.end()) return;
-  for (const auto& t : it->second.topics) {
+  Client& c = it->second;
+  opt.decimation = std::max<std::uint32_t>(1, opt.decimation);
+  c.stream_opts[topic] = opt;
+  for (auto& q : c.streams) {
+    if (q.topic == topic) q.opt = opt;  // re-subscribe: new decimation from the next chunk on
+  }
+  for (const auto& t : c.topics) {
     if (t == topic) return;
   }
-  it->second.topics.push_back(topic);
+  c.topics.push_back(topic);
 }
 
 void CommandServer::unsubscribe(std::uint64_t client, const std::string& topic) {
   std::lock_guard lk(mu_);
   auto it = clients_.find(client);
   if (it == clients_.end()) return;
-  std::erase(it->second.topics, topic);
+  Client& c = it->second;
+  std::erase(c.topics, topic);
+  c.stream_opts.erase(topic);
+  std::erase_if(c.streams, [&](const StreamQueue& q) { return q.topic == topic; });
+}
+
+// mu_ held.
+void CommandServer::enqueue_stream(Client& c, const std::string& topic,
+                                   const std::shared_ptr<const StreamChunk>& chunk) {
+  StreamQueue* q = nullptr;
+  for (auto& s : c.streams) {
+    if (s.topic == topic) q = &s;
+  }
+  if (q == nullptr) {
+    StreamQueue nq;
+    nq.topic = topic;
+    if (auto o = c.stream_opts.find(topic); o != c.stream_opts.end()) nq.opt = o->second;
+    c.streams.push_back(std::move(nq));
+    q = &c.streams.back();
+  }
+  q->source_dropped = chunk->source_dropped;
+  const std::uint64_t dec = q->opt.decimation;
+  for (std::size_t i = 0; i < chunk->items.size(); ++i) {
+    if (chunk->items[i].seq % dec != 0) continue;
+    q->refs.push_back({chunk, static_cast<std::uint32_t>(i)});
+  }
+  const std::size_t cap = std::max<std::size_t>(1, opt_.max_stream_samples);
+  if (q->refs.size() > cap) {
+    const std::size_t over = q->refs.size() - cap;
+    q->refs.erase(q->refs.begin(), q->refs.begin() + static_cast<std::ptrdiff_t>(over));
+    q->dropped += over;
+    stats_.stream_dropped += over;
+  }
+}
+
+// mu_ held. One batch line per pass, while the client's unsent output is below the low-water mark.
+void CommandServer::pump_streams(Client& c) {
+  const std::size_t max_batch = std::max<std::size_t>(1, opt_.max_batch_samples);
+  for (auto& q : c.streams) {
+    while (!q.refs.empty() && c.out.size() < kStreamLowWaterBytes) {
+      const std::size_t n = std::min(max_batch, q.refs.size());
+      std::string line;
+      line.reserve(160 + n * (q.refs.front().chunk->items[q.refs.front().index].json.size() + 1));
+      line += "{\"event\":";
+      line += nlohmann::json(q.topic).dump();
+      line += ",\"count\":" + std::to_string(n);
+      line += ",\"decimation\":" + std::to_string(q.opt.decimation);
+      line += ",\"dropped\":" + std::to_string(q.dropped);
+      line += ",\"source_dropped\":" + std::to_string(q.source_dropped);
+      line += ",\"samples\":[";
+      for (std::size_t i = 0; i < n; ++i) {
+        if (i != 0) line += ',';
+        const StreamRef& r = q.refs[i];
+        line += r.chunk->items[r.index].json;
+      }
+      line += "]}\n";
+      q.refs.erase(q.refs.begin(), q.refs.begin() + static_cast<std::ptrdiff_t>(n));
+      stats_.stream_samples_sent += n;
+      c.out += line;
+    }
+  }
+}
+
+void CommandServer::publish_stream(const std::string& topic,
+                                   std::shared_ptr<const StreamChunk> chunk) {
+  if (!chunk) return;
+  bool any = false;
+  {
+    std::lock_guard lk(mu_);
+    stream_topics_.insert(topic);
+    if (chunk->items.empty()) return;
+    for (auto& [id, c] : clients_) {
+      if (c.overflow) continue;
+      if (std::find(c.topics.begin(), c.topics.end(), topic) == c.topics.end()) continue;
+      enqueue_stream(c, topic, chunk);
+      pump_streams(c);  // written by the server thread (POLLOUT), never here
+      any = true;
+    }
+  }
+  if (any) {
+    const char b = 's';
+    [[maybe_unused]] auto n = ::write(wake_pipe_[1], &b, 1);
+  }
+}
+
+std::uint64_t CommandServer::stream_dropped(std::uint64_t client, const std::string& topic) const {
+  std::lock_guard lk(mu_);
+  auto it = clients_.find(client);
+  if (it == clients_.end()) return 0;
+  for (const auto& q : it->second.streams) {
+    if (q.topic == topic) return q.dropped;
+  }
+  return 0;
 }
 
 void CommandServer::publish(const std::string& topic, const nlohmann::json& event) {
+  bool stream_topic = false;
+  {
+    std::lock_guard lk(mu_);
+    stream_topic = stream_topics_.count(topic) != 0;
+  }
+  if (stream_topic) {
+    // One format per topic: a single event on a stream topic is a one-sample chunk.
+    auto chunk = std::make_shared<StreamChunk>();
+    nlohmann::json sample = event;
+    if (sample.is_object()) sample.erase("event");
+    std::uint64_t seq = 0;
+    if (auto c = event.find("cycle"); event.is_object() && c != event.end() && c->is_number_unsigned()) {
+      seq = c->get<std::uint64_t>();
+    }
+    std::string text = to_line(sample);
+    text.pop_back();  // the newline
+    chunk->items.push_back({seq, std::move(text)});
+    publish_stream(topic, std::move(chunk));
+    return;
+  }
   const std::string s = to_line(event);
   bool any = false;
   {

@@ -32,14 +32,33 @@
 //   client while it has unprocessed complete lines).
 // - fairness: per poll round each client gets at most kReadBudgetBytes read and kLinesPerRound
 //   requests handled, so no client can keep the thread busy while others wait.
+//
+// Sample streams (the `telemetry` topic, issue 21): publish_stream() hands the server a chunk of
+// pre-encoded samples, each with its sequence number (the loop cycle); the topic is a stream topic
+// from then on. Every subscriber has its own bounded queue of samples (max_stream_samples), filled
+// with every sample whose sequence number is a multiple of the decimation it asked for
+// (subscribe(..., StreamOptions), default 1: every sample). The server moves queued samples into
+// the client's output as batch lines while its unsent output is below kStreamLowWaterBytes:
+//   {"event": TOPIC, "count": N, "decimation": K, "dropped": D, "source_dropped": S,
+//    "samples": [ {sample}, ... ]}
+// D counts this client's samples the server dropped (oldest first) because the client did not
+// read fast enough: a slow or stuck subscriber never blocks the publisher or other clients and is
+// not disconnected for it. S is the publisher's own count (telemetry: samples the RT loop could
+// not hand to the writer, telemetry ring full), passed through. Both are cumulative. A
+// subscriber sees gaps in the sample sequence numbers exactly where D or S grew.
+// publish() of a single event on a stream topic goes into the same queues as a one-sample chunk
+// (its "event" key removed), so a subscriber sees one format.
 #include <sys/types.h>
 
 #include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <deque>
 #include <map>
+#include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -60,6 +79,8 @@ struct CommandServerOptions {
   double idle_timeout_s = 60.0;           // socket.idle_timeout_s
   double max_requests_per_s = 500.0;      // socket.max_requests_per_s (estop/hold/stop exempt)
   double max_notices_per_s = 20.0;        // on_notice calls; the rest are counted and summarised
+  std::size_t max_stream_samples = 8192;  // per subscriber and stream topic (8 s at 1 kHz)
+  std::size_t max_batch_samples = 200;    // samples per batch line
 };
 
 struct ClientInfo {
@@ -79,6 +100,20 @@ struct ServerNotice {
 };
 [[nodiscard]] const char* to_string(ServerNotice::Kind k) noexcept;
 
+// One sample of a stream topic: its sequence number (telemetry: the loop cycle) and its JSON
+// object text (no newline).
+struct StreamItem {
+  std::uint64_t seq = 0;
+  std::string json;
+};
+struct StreamChunk {
+  std::vector<StreamItem> items;  // in sequence order
+  std::uint64_t source_dropped = 0;  // the publisher's cumulative loss count (passed through)
+};
+struct StreamOptions {
+  std::uint32_t decimation = 1;  // only samples whose seq is a multiple of this (1: every sample)
+};
+
 struct CommandServerStats {
   std::uint64_t connections = 0;
   std::uint64_t requests = 0;
@@ -89,6 +124,8 @@ struct CommandServerStats {
   std::uint64_t rate_limited = 0;    // requests refused by the per-client rate limit
   std::uint64_t oversize_buffer = 0; // clients dropped for > max_backlog_bytes unread output
   std::uint64_t notices_suppressed = 0;  // notices over max_notices_per_s (counted, not emitted)
+  std::uint64_t stream_samples_sent = 0;  // samples moved into subscribers' output (all clients)
+  std::uint64_t stream_dropped = 0;       // samples dropped from slow subscribers' queues
   std::size_t clients = 0;
 };
 
@@ -101,6 +138,8 @@ class CommandServer {
   // Per poll round and client: bytes read and requests handled (fairness between clients).
   static constexpr std::size_t kReadBudgetBytes = 16 * 1024;
   static constexpr int kLinesPerRound = 8;
+  // Stream samples are moved into a client's output only while less than this is unsent.
+  static constexpr std::size_t kStreamLowWaterBytes = 64 * 1024;
 
   CommandServer(CommandServerOptions opt, Handler handler, NoticeHandler on_notice = {});
   ~CommandServer();
@@ -114,8 +153,15 @@ class CommandServer {
   // Subscriptions: the handler may call subscribe(client, topic); publish() queues a line for every
   // subscriber of the topic (thread-safe, non-blocking; called from non-RT threads only).
   void subscribe(std::uint64_t client, const std::string& topic);
+  // The same, with options for a stream topic (kept until unsubscribe; ignored for other topics).
+  void subscribe(std::uint64_t client, const std::string& topic, StreamOptions opt);
   void unsubscribe(std::uint64_t client, const std::string& topic);
   void publish(const std::string& topic, const nlohmann::json& event);
+  // Queues a chunk of samples for every subscriber of a stream topic (see the header comment).
+  // Thread-safe, non-blocking, never drops a client; called from non-RT threads only.
+  void publish_stream(const std::string& topic, std::shared_ptr<const StreamChunk> chunk);
+  // Samples dropped so far for this client and topic (0 if unknown).
+  [[nodiscard]] std::uint64_t stream_dropped(std::uint64_t client, const std::string& topic) const;
   // Called on the server thread, with no lock held, once for every client that is gone (hung up,
   // dropped, evicted), after the round in which it went: a dead-man (continuous jog) or a
   // per-client resource ends with its client. Set before start().
@@ -127,6 +173,17 @@ class CommandServer {
 
  private:
   using Clock = std::chrono::steady_clock;
+  struct StreamRef {
+    std::shared_ptr<const StreamChunk> chunk;
+    std::uint32_t index = 0;
+  };
+  struct StreamQueue {
+    std::string topic;
+    StreamOptions opt;
+    std::deque<StreamRef> refs;  // bounded by max_stream_samples, oldest dropped
+    std::uint64_t dropped = 0;
+    std::uint64_t source_dropped = 0;
+  };
   struct Client {
     int fd = -1;
     ClientInfo info;
@@ -138,6 +195,8 @@ class CommandServer {
     bool requested = false;   // has sent a complete request
     bool overflow = false;    // out > max_backlog_bytes: dropped at the end of the round
     std::vector<std::string> topics;
+    std::map<std::string, StreamOptions> stream_opts;  // options given at subscribe
+    std::vector<StreamQueue> streams;                  // stream topics it is subscribed to
     Clock::time_point connected_at{};
     Clock::time_point last_request{};  // last complete request line (connect time before one)
     double tokens = 0.0;               // rate limit bucket
@@ -156,6 +215,9 @@ class CommandServer {
   bool process_input(Client& c);        // handles up to kLinesPerRound lines; false: close
   [[nodiscard]] bool has_complete_line(const Client& c) const;
   bool flush_client(Client& c);
+  void pump_streams(Client& c);  // queued stream samples -> batch lines in c.out (mu_ held)
+  void enqueue_stream(Client& c, const std::string& topic,
+                      const std::shared_ptr<const StreamChunk>& chunk);  // mu_ held
   void handle_line(Client& c, const std::string& line);
   void queue(Client& c, const nlohmann::json& j);
   void notice(ServerNotice::Kind k, const ClientInfo& who, std::string text);
@@ -177,6 +239,7 @@ class CommandServer {
   CommandServerStats stats_;
   DisconnectHandler on_disconnect_;
   std::vector<ClientInfo> pending_disconnects_;  // guarded by mu_
+  std::set<std::string> stream_topics_;          // guarded by mu_
   std::vector<ServerNotice> pending_notices_;  // server thread only; emitted without mu_
   double notice_tokens_ = 0.0;
   Clock::time_point notice_refill_at_{};

@@ -133,8 +133,11 @@ std::vector<CommandSpec> build_table() {
        kAnyState, false, false, "any", "{recording, path, directory}"});
   const ArgSpec topic = typed("topic", ArgType::kChoice, true, "\"telemetry\" or \"events\"",
                               "telemetry (samples) or events (log lines)", "telemetry|events");
-  add({CommandId::kSubscribe, "subscribe", "stream telemetry samples or events on this connection",
-       {topic}, kAnyState, false, false, "any", "{topic}"});
+  add({CommandId::kSubscribe, "subscribe",
+       "stream telemetry samples (every loop sample, in batches) or events on this connection",
+       {topic, number("decimation", false, 1.0, 10000.0,
+                      "telemetry only: every N-th sample (default 1: every sample)")},
+       kAnyState, false, false, "any", "{topic, decimation}"});
   add({CommandId::kUnsubscribe, "unsubscribe", "end a subscription", {topic}, kAnyState, false,
        false, "any", "{topic}"});
   add({CommandId::kForce, "force",

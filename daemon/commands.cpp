@@ -73,6 +73,8 @@ json Daemon::counters_json(const LoopStatus& st) const {
                    {"rate_limited", s.rate_limited},
                    {"oversize_buffer", s.oversize_buffer},
                    {"notices_suppressed", s.notices_suppressed},
+                   {"stream_samples_sent", s.stream_samples_sent},
+                   {"stream_dropped", s.stream_dropped},
                    {"clients", s.clients}};
   }
   return j;
@@ -110,8 +112,11 @@ json Daemon::status_json() {
          {"velocity_clamps", st.velocity_clamps},
          {"accel_clamps", st.accel_clamps},
          {"limits_generation", st.limits_generation},
+         {"stop", to_string(st.stop_phase)},
+         {"soft_limits_mm", {{"min", arr3(st.soft_min_mm, axes)}, {"max", arr3(st.soft_max_mm, axes)}}},
          {"spindle_rpm_cmd", st.spindle_rpm_cmd},
          {"counters", counters_json(st)},
+         {"config", reload_json()},
          {"spindle",
           {{"present", st.spindle_present},
            {"feedback", st.spindle_feedback},
@@ -502,11 +507,14 @@ json Daemon::cmd_jog(const json& req) {
                        (st.attached_job != 0 ? " with a program loaded (stop unloads it)" : "") +
                        (st.jogging ? " while jogging" : ""));
   }
-  const auto& ax = cfg_.machine.axes[static_cast<std::size_t>(axis)];
-  const double target = st.ref_mm[static_cast<std::size_t>(axis)] + d;
-  if (target < ax.min_mm || target > ax.max_mm) {
+  const auto a = static_cast<std::size_t>(axis);
+  const auto& ax = cfg_.machine.axes[a];
+  const LiveLimits lim = loop_->active_limits();
+  const double target = st.ref_mm[a] + d;
+  if (target < lim.min_mm[a] || target > lim.max_mm[a]) {
     throw CommandError("jog target " + std::to_string(target) + " mm outside the soft limits of " +
-                       ax.name + " [" + std::to_string(ax.min_mm) + ", " + std::to_string(ax.max_mm) + "]");
+                       ax.name + " [" + std::to_string(lim.min_mm[a]) + ", " +
+                       std::to_string(lim.max_mm[a]) + "]");
   }
   loop_->post({CommandKind::kJog, axis, v / 60.0, d});
   return {{"axis", ax.name}, {"target_mm", target}};
@@ -588,12 +596,14 @@ json Daemon::cmd_record(const json& req) {
 std::pair<double, double> Daemon::bound(Bound b, const json& req) const {
   switch (b) {
     case Bound::kStatic: break;
-    case Bound::kJogVelocity: return {1e-3, cfg_.safety.jog_max_velocity_mm_min};
+    // The live limits (SIGHUP swaps them at a cycle boundary): what the loop enforces now.
+    case Bound::kJogVelocity: return {1e-3, loop_->active_limits().jog_max_velocity_mm_s * 60.0};
     case Bound::kAxisPosition: {
-      const auto& ax = cfg_.machine.axes[static_cast<std::size_t>(axis_index(req.at("axis"), cfg_.machine))];
-      return {ax.min_mm, ax.max_mm};
+      const auto a = static_cast<std::size_t>(axis_index(req.at("axis"), cfg_.machine));
+      const LiveLimits l = loop_->active_limits();
+      return {l.min_mm[a], l.max_mm[a]};
     }
-    case Bound::kOverridePercent: return {0.0, cfg_.interpolator.feed_override_max_percent};
+    case Bound::kOverridePercent: return {0.0, loop_->active_limits().feed_override_max * 100.0};
     case Bound::kForceReference:
       // Keep below the force ceiling: a reference at or above it would hold the feed at once.
       return {0.0, cfg_.force.limits.force_ceiling_N};
@@ -672,7 +682,14 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
       }
       const MachineState now = post_and_wait({CommandKind::kReset}, st.state, 1.0);
       if (now == S::kFault || now == S::kEstop) {
-        throw CommandError("reset refused: the cause (" + std::string(to_string(st.cause)) + ") is still present");
+        // The loop's reset rule names what is still missing (SafetySupervisor::reset_block).
+        const ResetBlock b = loop_->status().reset_block;
+        std::string why = b ? describe(b) : "the cause is still present";
+        if (b && b.axis >= 0 && b.axis < static_cast<int>(cfg_.machine.axes.size())) {
+          why += " (axis " + cfg_.machine.axes[static_cast<std::size_t>(b.axis)].name + ")";
+        }
+        throw CommandError("reset refused: " + why + "; fault cause " +
+                           std::string(to_string(st.cause)));
       }
       const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
       while (loop_->status().state != S::kReady && std::chrono::steady_clock::now() < until) {
@@ -695,9 +712,15 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kSubscribe:
     case CommandId::kUnsubscribe: {
       const std::string topic = req.at("topic").get<std::string>();
-      if (spec->id == CommandId::kSubscribe) server_->subscribe(client.id, topic);
-      else server_->unsubscribe(client.id, topic);
-      return {{"topic", topic}};
+      if (spec->id == CommandId::kUnsubscribe) {
+        server_->unsubscribe(client.id, topic);
+        return {{"topic", topic}};
+      }
+      const double dec = req.value("decimation", 1.0);
+      if (dec != std::floor(dec)) throw CommandError("decimation must be a whole number");
+      if (topic != "telemetry" && dec != 1.0) throw CommandError("decimation is for telemetry only");
+      server_->subscribe(client.id, topic, StreamOptions{static_cast<std::uint32_t>(dec)});
+      return {{"topic", topic}, {"decimation", static_cast<int>(dec)}};
     }
     case CommandId::kForce: return cmd_force(req);
     case CommandId::kSimGpio: return cmd_sim_gpio(req);

@@ -191,17 +191,13 @@ void Daemon::start_components() {
     return IoOutputs{st.out_drive_enable, st.out_spindle_enable, st.out_mist, st.out_flood, st.cycle};
   });
   writer_ = std::make_unique<TelemetryWriter>(loop_->telemetry(), loop_->period_s());
-  writer_->set_stream(
-      [this](const TelemetrySample& s) {
-        if (!server_) return;
-        server_->publish("telemetry",
-                         {{"event", "telemetry"}, {"cycle", s.cycle}, {"state", to_string(s.state)},
-                          {"ref_mm", s.ref_mm}, {"act_mm", s.act_mm}, {"eps_mm", s.eps_mm},
-                          {"line", s.line}, {"progress_mm", s.progress_mm},
-                          {"override", s.override_applied}, {"force_n", s.force_N},
-                          {"force_override", s.force_override}, {"spindle_rpm", s.spindle_rpm}});
-      },
-      100);
+  // Every sample the loop produces goes to the `telemetry` subscribers, in batches (issue 21:
+  // the scope needs all of them; a client asks for decimation itself).
+  writer_->set_batch_stream([this](std::span<const StreamSample> batch) {
+    if (components_ready_.load(std::memory_order_acquire)) {
+      server_->publish_stream("telemetry", make_stream_chunk(batch, writer_->dropped()));
+    }
+  });
   writer_->start();
   logger_ = std::make_unique<EventLogger>(loop_->events(),
                                           [this](const RtEvent& e, const std::string& t) { on_event(e, t); });
@@ -305,10 +301,34 @@ void Daemon::controlled_shutdown() {
                st.drives_enabled ? "STILL ENABLED" : "disabled");
 }
 
+namespace {
+
+std::string change_text(const KeyChange& c) { return c.key + ": " + c.old_value + " -> " + c.new_value; }
+
+}  // namespace
+
+nlohmann::json Daemon::reload_json() const {
+  std::lock_guard lk(reload_mu_);
+  nlohmann::json pending = nlohmann::json::array();
+  for (const auto& [k, v] : pending_restart_) pending.push_back(k);
+  return {{"file", opt_.config_path},
+          {"reloads", reloads_.load()},
+          {"reloads_rejected", reloads_rejected_.load()},
+          {"pending_restart", pending},
+          {"last_reload",
+           {{"cycle", last_reload_.cycle},
+            {"applied", last_reload_.applied},
+            {"refused", last_reload_.refused}}}};
+}
+
+// SIGHUP (issue 16: "every change is applied or refused, never ignored"). The new file must load
+// as a whole (else nothing changes); then each changed key is applied or refused on its own.
 void Daemon::reload_config() {
   spdlog::info("SIGHUP: reloading {}", opt_.config_path);
   config::Config n;
+  YAML::Node tree;
   try {
+    tree = config::load_yaml_file(opt_.config_path);
     n = config::load_config_file(opt_.config_path);
   } catch (const config::ConfigError& e) {
     for (const auto& m : e.errors()) spdlog::error("SIGHUP: {}", m);
@@ -321,67 +341,143 @@ void Daemon::reload_config() {
     return;
   }
   ++reloads_;
-  try {
-    std::array<control::FeedDriveParams, 3> dp{};
-    int delay = 0;
-    for (std::size_t i = 0; i < cfg_.machine.axes.size() && i < 3; ++i) {
-      dp[i] = cfg_.machine.axes[i].drive;
-      dp[i].period_s = cfg_.machine.period_s;
-      delay = std::max(delay, dp[i].delay_cycles);
-    }
-    const auto p = config::make_servo_params(n.control, n.control.controller, dp,
-                                             static_cast<int>(cfg_.machine.axes.size()),
-                                             cfg_.machine.period_s, delay);
-    // Live in every state: set_gains keeps the controller state (bumpless integral).
-    const auto gen = loop_->stage_gains(p);
-    cfg_.control = n.control;
-    spdlog::info("SIGHUP: control gains staged (generation {}, state {})", gen,
-                 to_string(loop_->status().state));
-  } catch (const std::exception& e) {
-    spdlog::error("SIGHUP: gains rejected: {}", e.what());
+  const std::vector<KeyChange> changes = diff_config(running_yaml_, tree);
+  ReloadReport rep;
+  auto applied = [&](const KeyChange& c) { rep.applied.push_back(change_text(c)); };
+  auto refused = [&](const KeyChange& c, const std::string& why) {
+    rep.refused.push_back(change_text(c) + ": " + why);
+  };
+  const bool same_axes = n.machine.axes.size() == cfg_.machine.axes.size();
+  bool any_gains = false, any_limits = false;
+  for (const auto& c : changes) {
+    any_gains = any_gains || c.cls == ReloadClass::kGains;
+    any_limits = any_limits || (c.cls == ReloadClass::kLimits && same_axes);
   }
-  // Live safety limits: safety band/limits and the per-axis velocity/acceleration clamps.
-  if (n.machine.axes.size() == cfg_.machine.axes.size()) {
+
+  // Gains: the whole control section through the same checks as `gains set`.
+  std::string gains_error;
+  if (any_gains) {
     try {
-      const LiveLimits l = live_limits_from(n);
-      const LiveLimits cur = loop_->active_limits();
-      if (l.ferror_mm != cur.ferror_mm || l.min_ferror_mm != cur.min_ferror_mm ||
-          l.contour_error_limit_mm != cur.contour_error_limit_mm ||
-          l.stop_decel_mm_s2 != cur.stop_decel_mm_s2 || l.max_velocity_mm_s != cur.max_velocity_mm_s ||
-          l.max_accel_mm_s2 != cur.max_accel_mm_s2) {
-        const auto gen = loop_->stage_limits(l);
-        cfg_.safety.ferror_mm = n.safety.ferror_mm;
-        cfg_.safety.min_ferror_mm = n.safety.min_ferror_mm;
-        cfg_.safety.contour_error_limit_mm = n.safety.contour_error_limit_mm;
-        cfg_.safety.stop_decel_mm_s2 = n.safety.stop_decel_mm_s2;
-        for (std::size_t i = 0; i < cfg_.machine.axes.size(); ++i) {
-          cfg_.machine.axes[i].max_velocity_mm_min = n.machine.axes[i].max_velocity_mm_min;
-          cfg_.machine.axes[i].max_accel_mm_s2 = n.machine.axes[i].max_accel_mm_s2;
+      const auto p = servo_params_for(n.control);
+      const auto gen = loop_->stage_gains(p);
+      cfg_.control = n.control;
+      spdlog::info("SIGHUP: control gains staged (generation {}, state {})", gen,
+                   to_string(loop_->status().state));
+    } catch (const std::exception& e) {
+      gains_error = e.what();
+    }
+  }
+
+  // Live limits: the running values, with each changed live key taken from the new file unless a
+  // rule refuses it (a soft limit that would put an axis outside it while it stands there).
+  std::map<std::string, std::string> limit_refusals;
+  if (any_limits) {
+    config::Config c = cfg_;
+    c.safety.ferror_mm = n.safety.ferror_mm;
+    c.safety.min_ferror_mm = n.safety.min_ferror_mm;
+    c.safety.contour_error_limit_mm = n.safety.contour_error_limit_mm;
+    c.safety.stop_decel_mm_s2 = n.safety.stop_decel_mm_s2;
+    c.safety.standstill_velocity_mm_s = n.safety.standstill_velocity_mm_s;
+    c.safety.standstill_time_s = n.safety.standstill_time_s;
+    c.safety.standstill_timeout_s = n.safety.standstill_timeout_s;
+    c.safety.jog_max_velocity_mm_min = n.safety.jog_max_velocity_mm_min;
+    c.interpolator.feed_override_max_percent = n.interpolator.feed_override_max_percent;
+    const auto st = loop_->status();
+    for (std::size_t i = 0; i < c.machine.axes.size(); ++i) {
+      auto& a = c.machine.axes[i];
+      const auto& b = n.machine.axes[i];
+      a.max_velocity_mm_min = b.max_velocity_mm_min;
+      a.max_accel_mm_s2 = b.max_accel_mm_s2;
+      const double pos = st.act_mm[i];
+      const std::string key = "machine.axes[" + std::to_string(i) + "].";
+      auto soft = [&](double& dst, double v, const char* name, bool is_min) {
+        if (dst == v) return;
+        if (is_min ? pos < v : pos > v) {
+          limit_refusals[key + name] = "axis " + a.name + " is at " + std::to_string(pos) +
+                                       " mm, outside the new limit (move it inside first)";
+          return;
         }
+        dst = v;
+      };
+      soft(a.min_mm, b.min_mm, "min_mm", true);
+      soft(a.max_mm, b.max_mm, "max_mm", false);
+    }
+    try {
+      const LiveLimits l = live_limits_from(c);
+      if (!(l == loop_->active_limits())) {
+        const auto gen = loop_->stage_limits(l);
         spdlog::info("SIGHUP: safety limits staged (generation {})", gen);
       }
+      cfg_.safety = c.safety;
+      cfg_.interpolator.feed_override_max_percent = c.interpolator.feed_override_max_percent;
+      cfg_.machine = c.machine;
+      planner_->set_live(cfg_);
     } catch (const std::exception& e) {
-      spdlog::error("SIGHUP: safety limits rejected: {}", e.what());
+      limit_refusals["*"] = e.what();
     }
   }
-  // Everything else needs a restart (the loop holds its limits in a copy taken at start-up).
-  if (n.loop.period_us != cfg_.loop.period_us || n.loop.priority != cfg_.loop.priority ||
-      n.loop.cpu != cfg_.loop.cpu) {
-    spdlog::warn("SIGHUP: loop: changes need a restart");
+
+  std::lock_guard lk(reload_mu_);
+  for (const auto& c : changes) {
+    // A key back at its running value is no longer pending (reported as such).
+    const auto pend = pending_restart_.find(c.key);
+    if (pend != pending_restart_.end() && pend->second == c.new_value) {
+      pending_restart_.erase(pend);
+      rep.applied.push_back(change_text(c) + " (back to the running value)");
+      continue;
+    }
+    switch (c.cls) {
+      case ReloadClass::kGains:
+        if (gains_error.empty()) applied(c);
+        else refused(c, "gains refused: " + gains_error);
+        break;
+      case ReloadClass::kLimits: {
+        if (!same_axes) {
+          refused(c, "needs restart (the number of axes changed)");
+          break;
+        }
+        auto r = limit_refusals.find(c.key);
+        if (r == limit_refusals.end()) r = limit_refusals.find("*");
+        if (r != limit_refusals.end()) refused(c, "refused: " + r->second);
+        else applied(c);
+        break;
+      }
+      case ReloadClass::kLog:
+        spdlog::set_level(spdlog::level::from_str(n.log.level));
+        cfg_.log.level = n.log.level;
+        applied(c);
+        break;
+      case ReloadClass::kCompanion:
+        refused(c, "not used by contourd: restart contour-web / contour-bridge to apply it");
+        break;
+      case ReloadClass::kRestart:
+        refused(c, "needs restart");
+        if (pend == pending_restart_.end()) pending_restart_[c.key] = c.old_value;
+        break;
+    }
   }
-  if (n.safety.missed_tpdo_streak != cfg_.safety.missed_tpdo_streak) {
-    spdlog::warn("SIGHUP: safety.missed_tpdo_streak: changes need a restart");
+  rep.cycle = loop_->status().cycle;
+  for (const auto& a : rep.applied) spdlog::info("SIGHUP: applied {}", a);
+  for (const auto& r : rep.refused) spdlog::warn("SIGHUP: {}", r);
+  if (changes.empty()) spdlog::info("SIGHUP: no key changed");
+  if (server_) {
+    server_->publish("events", {{"event", "reload"}, {"applied", rep.applied}, {"refused", rep.refused}});
   }
-  if (n.machine.axes.size() != cfg_.machine.axes.size()) spdlog::warn("SIGHUP: machine: changes need a restart");
-  if (n.socket.path != cfg_.socket.path || n.socket.mode != cfg_.socket.mode ||
-      n.socket.group != cfg_.socket.group || n.socket.max_clients != cfg_.socket.max_clients ||
-      n.socket.max_line_bytes != cfg_.socket.max_line_bytes ||
-      n.socket.idle_timeout_s != cfg_.socket.idle_timeout_s ||
-      n.socket.max_requests_per_s != cfg_.socket.max_requests_per_s ||
-      n.socket.max_buffered_bytes != cfg_.socket.max_buffered_bytes) {
-    spdlog::warn("SIGHUP: socket: changes need a restart");
+  last_reload_ = std::move(rep);
+  running_yaml_ = tree;
+}
+
+control::ServoParams Daemon::servo_params_for(const config::ControlConfig& control) const {
+  std::array<control::FeedDriveParams, 3> dp{};
+  int delay = 0;
+  for (std::size_t i = 0; i < cfg_.machine.axes.size() && i < 3; ++i) {
+    dp[i] = cfg_.machine.axes[i].drive;
+    dp[i].period_s = cfg_.machine.period_s;
+    delay = std::max(delay, dp[i].delay_cycles);
   }
-  if (n.bus.type != cfg_.bus.type) spdlog::warn("SIGHUP: bus: changes need a restart");
+  return config::make_servo_params(control, control.controller, dp,
+                                   static_cast<int>(cfg_.machine.axes.size()),
+                                   cfg_.machine.period_s, delay);
 }
 
 // SIGUSR1 = E-stop, SIGUSR2 = hold: the out-of-band path that does not go through the command
@@ -431,6 +527,11 @@ int Daemon::run() {
   sigaddset(&set, SIGUSR2);
   sigaddset(&set, SIGPIPE);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);
+  try {
+    running_yaml_ = config::load_yaml_file(opt_.config_path);
+  } catch (const std::exception& e) {
+    spdlog::warn("cannot re-read {} for SIGHUP comparisons: {}", opt_.config_path, e.what());
+  }
   try {
     check_paths();
     start_components();

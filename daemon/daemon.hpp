@@ -7,10 +7,11 @@
 // async worker. All non-RT threads are created from main, which stays SCHED_OTHER.
 // Signals: SIGTERM/SIGINT -> controlled stop, drives disabled, files flushed, exit 0;
 // SIGUSR1 -> E-stop, SIGUSR2 -> hold (out of band: main thread posts to the loop, no socket);
-// SIGHUP -> re-read the config file: gains and the live safety limits (following-error band,
-// contour-error limit, stop deceleration, per-axis velocity/acceleration clamps) are validated and
-// swapped at a cycle boundary in any state, RUNNING included (ServoController::set_gains keeps the
-// controller state); every other changed section is logged as needing a restart.
+// SIGHUP -> re-read the config file and compare it with the running one key by key
+// (daemon/config_reload.hpp): every changed key is either applied at a cycle boundary (gains, the
+// live safety limits incl. soft limits, velocity/acceleration/override/jog limits; log.level at
+// once) or refused naming it ("needs restart", or why), in the log, the `events` stream and
+// `status.config`; nothing is silently dropped.
 // I/O: IoChannels (io_channels.hpp) owns the dynamometer reader and the GPIO lines; the loop
 // reads them through RtIo; IoChannels' supervisor thread applies the loop's GPIO outputs.
 // systemd: READY=1 once the drives are enabled and the loop runs; WATCHDOG=1 only while the loop's
@@ -32,6 +33,7 @@
 #include "daemon/axis_bus.hpp"
 #include "daemon/command_server.hpp"
 #include "daemon/command_table.hpp"
+#include "daemon/config_reload.hpp"
 #include "daemon/event_log.hpp"
 #include "daemon/io_channels.hpp"
 #include "daemon/planner.hpp"
@@ -89,6 +91,8 @@ class Daemon {
   void stop_components();
   void controlled_shutdown();
   void reload_config();
+  // The loop's servo parameters for a control section on this machine (start-up, SIGHUP, gains).
+  [[nodiscard]] control::ServoParams servo_params_for(const config::ControlConfig& control) const;
   void out_of_band_signal(int sig, pid_t from_pid, uid_t from_uid);
   void on_event(const RtEvent& e, const std::string& text);
   void on_bus_message(const std::string& text);
@@ -127,6 +131,13 @@ class Daemon {
   std::atomic<std::uint64_t> reloads_{0};           // SIGHUP reloads applied
   std::atomic<std::uint64_t> reloads_rejected_{0};  // SIGHUP with a config that did not load
   std::atomic<bool> shutdown_{false};
+  // SIGHUP (issue 16): the file as last loaded (YAML tree), the keys whose file value is not the
+  // running one (refused: needs restart; key -> running value) and what the last reload did.
+  YAML::Node running_yaml_;
+  std::map<std::string, std::string> pending_restart_;
+  ReloadReport last_reload_;
+  mutable std::mutex reload_mu_;  // pending_restart_, last_reload_ (main thread vs status)
+  nlohmann::json reload_json() const;
   std::atomic<bool> components_ready_{false};  // loop_/server_ published (bus event thread reads)
 
   std::mutex jobs_mu_;  // command thread vs logger thread

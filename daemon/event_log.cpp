@@ -6,6 +6,8 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <memory>
 #include <sstream>
 
@@ -97,6 +99,15 @@ std::string describe(const RtEvent& e) {
         o << ": " << e.value << " missed TPDOs in a row";
       } else if (e.cause == FaultCause::kForceStale) {
         o << ": sample age " << e.value << " s > " << e.limit << " s (or invalid)";
+      } else if (e.cause == FaultCause::kDriveEmcy ||
+                 (e.cause == FaultCause::kDriveFault && e.value != 0.0)) {
+        char code[16];
+        std::snprintf(code, sizeof code, "0x%04X", static_cast<unsigned>(e.value));
+        o << ": EMCY code " << code << " (see the CANopen log line)";
+      } else if (e.cause == FaultCause::kNmtStateChange) {
+        o << ": node " << e.value << " is no longer NMT operational";
+      } else if (e.cause == FaultCause::kLimitCycle) {
+        o << ": " << e.value << " > " << e.limit;
       }
       break;
     case EventKind::kUnderrun: o << "segment queue underrun: feed hold on the path at "
@@ -125,6 +136,15 @@ std::string describe(const RtEvent& e) {
     case EventKind::kSpindleAtSpeed:
       o << "spindle at speed (" << e.limit << " rpm) after " << e.value << " s: feed move starts";
       break;
+    case EventKind::kStandstillTimeout:
+      o << "STANDSTILL TIMEOUT: axis " << e.axis << " still ";
+      if (std::isnan(e.value)) {
+        o << "without fresh feedback";
+      } else {
+        o << "moving at " << e.value << " mm/s";
+      }
+      o << " " << e.limit << " s after the stop (safety.standstill_timeout_s): drives quick stop";
+      break;
   }
   return o.str();
 }
@@ -152,7 +172,7 @@ void EventLogger::drain() {
   RtEvent e;
   while (ring_.pop(e)) {
     const std::string text = describe(e);
-    if (e.kind == EventKind::kFault) {
+    if (e.kind == EventKind::kFault || e.kind == EventKind::kStandstillTimeout) {
       spdlog::error("{}", text);
     } else if (e.kind == EventKind::kCommandRefused || e.kind == EventKind::kUnderrun ||
                e.kind == EventKind::kProgramAborted || e.kind == EventKind::kForceFallback ||

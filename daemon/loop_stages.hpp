@@ -51,6 +51,7 @@ struct RefPoint {
   bool track = false;
   std::array<double, kMaxAxes> velocity_mm_s{};
   bool drives_on = false;
+  bool quick_stop = false;  // the drives' own CiA 402 quick stop (stop source: standstill timeout)
 };
 
 }  // namespace contour::daemon

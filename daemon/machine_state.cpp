@@ -34,6 +34,10 @@ std::string_view to_string(FaultCause c) noexcept {
     case FaultCause::kQueueUnderrun: return "segment queue underrun";
     case FaultCause::kEstopInput: return "E-stop input";
     case FaultCause::kEstopCommand: return "E-stop command";
+    case FaultCause::kDriveEmcy: return "drive emergency (EMCY)";
+    case FaultCause::kNmtStateChange: return "drive left NMT operational";
+    case FaultCause::kStandstillTimeout: return "standstill timeout";
+    case FaultCause::kLimitCycle: return "limit cycle";
     case FaultCause::kInternal: return "internal error";
   }
   return "?";

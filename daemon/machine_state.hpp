@@ -32,6 +32,10 @@ enum class FaultCause : std::uint8_t {
   kQueueUnderrun,
   kEstopInput,
   kEstopCommand,
+  kDriveEmcy,          // the drive sent an emergency message (EMCY) with an error code
+  kNmtStateChange,     // the drive left NMT operational (boot-up, stopped, pre-operational)
+  kStandstillTimeout,  // after a stop an axis still moved: the drives got the quick stop
+  kLimitCycle,         // command chatter / clamp rate over the limit-cycle watchdog's fault level
   kInternal,
 };
 inline constexpr std::size_t kFaultCauseCount = static_cast<std::size_t>(FaultCause::kInternal) + 1;

@@ -45,21 +45,41 @@ ProgramPlanner::ProgramPlanner(const config::Config& cfg) : cfg_(cfg) {}
 
 ProgramPlanner::~ProgramPlanner() { abort_and_join(); }
 
+config::Config ProgramPlanner::config_snapshot() const {
+  std::lock_guard lk(mu_);
+  return cfg_;
+}
+
+void ProgramPlanner::set_live(const config::Config& live) {
+  std::lock_guard lk(mu_);
+  for (std::size_t i = 0; i < cfg_.machine.axes.size() && i < live.machine.axes.size(); ++i) {
+    auto& a = cfg_.machine.axes[i];
+    const auto& b = live.machine.axes[i];
+    a.min_mm = b.min_mm;
+    a.max_mm = b.max_mm;
+    a.max_velocity_mm_min = b.max_velocity_mm_min;
+    a.max_accel_mm_s2 = b.max_accel_mm_s2;
+  }
+  cfg_.interpolator.feed_override_max_percent = live.interpolator.feed_override_max_percent;
+}
+
 control::InterpolatorParams ProgramPlanner::interpolator_params() const {
+  const config::Config cfg = config_snapshot();
   control::InterpolatorParams ip;
-  const auto pp = planner_params(cfg_);
+  const auto pp = planner_params(cfg);
   ip.fir_taps = pp.fir_taps;
   ip.fir2_taps = pp.fir2_taps;
-  ip.period_s = cfg_.machine.period_s;
-  ip.override_max = cfg_.interpolator.feed_override_max_percent / 100.0;
-  ip.optional_stop = cfg_.interpolator.optional_stop;
-  ip.capacity = static_cast<std::size_t>(cfg_.interpolator.queue_capacity);
+  ip.period_s = cfg.machine.period_s;
+  ip.override_max = cfg.interpolator.feed_override_max_percent / 100.0;
+  ip.optional_stop = cfg.interpolator.optional_stop;
+  ip.capacity = static_cast<std::size_t>(cfg.interpolator.queue_capacity);
   return ip;
 }
 
 ProgramSummary ProgramPlanner::validate(const ProgramText& src,
                                         const Eigen::Vector3d& start_mm) const {
-  control::ProgramSetup setup = config::to_program_setup(cfg_.program, cfg_.interpolator);
+  const config::Config cfg = config_snapshot();
+  control::ProgramSetup setup = config::to_program_setup(cfg.program, cfg.interpolator);
   setup.start_mm = start_mm;
   auto in = open_source(src);
   control::GcodeParser parser(setup, src.name);
@@ -67,7 +87,7 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src,
   std::vector<Eigen::Vector3d> pts;
   std::string text;
   ProgramSummary sum;
-  const double chord = cfg_.interpolator.tolerance_um * 1e-3 * cfg_.interpolator.arc_chord_fraction;
+  const double chord = cfg.interpolator.tolerance_um * 1e-3 * cfg.interpolator.arc_chord_fraction;
   try {
     while (!parser.ended()) {
       if (std::getline(*in, text)) {
@@ -85,8 +105,8 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src,
         for (const auto& p : pts) {
           sum.length_mm += (p - prev).norm();
           prev = p;
-          for (std::size_t i = 0; i < cfg_.machine.axes.size() && i < 3; ++i) {
-            const auto& ax = cfg_.machine.axes[i];
+          for (std::size_t i = 0; i < cfg.machine.axes.size() && i < 3; ++i) {
+            const auto& ax = cfg.machine.axes[i];
             const double x = p[static_cast<Eigen::Index>(i)];
             if (x < ax.min_mm - 1e-9 || x > ax.max_mm + 1e-9) {
               std::ostringstream m;
@@ -150,12 +170,13 @@ bool ProgramPlanner::wait_prefill(const ProgramJob& job, double timeout_s) {
 
 void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
                           Eigen::Vector3d start_mm, SegmentSink sink) {
+  const config::Config cfg = config_snapshot();
   try {
-    control::ProgramSetup setup = config::to_program_setup(cfg_.program, cfg_.interpolator);
+    control::ProgramSetup setup = config::to_program_setup(cfg.program, cfg.interpolator);
     setup.start_mm = start_mm;
     auto in = open_source(src);
     control::GcodeParser parser(setup, src.name);
-    control::BlendPlanner planner(planner_params(cfg_), start_mm);
+    control::BlendPlanner planner(planner_params(cfg), start_mm);
     std::vector<control::Block> blocks;
     std::string text;
     control::PlannedSegment seg;

@@ -67,6 +67,11 @@ class ProgramPlanner {
 
   [[nodiscard]] control::InterpolatorParams interpolator_params() const;
 
+  // SIGHUP: the live machine limits (soft limits, axis velocity/acceleration, override maximum)
+  // for the programs loaded from now on (a running program keeps the plan it has).
+  void set_live(const config::Config& live);
+  [[nodiscard]] config::Config config_snapshot() const;
+
  private:
   void plan(std::shared_ptr<ProgramJob> job, ProgramText src, Eigen::Vector3d start_mm,
             SegmentSink sink);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace contour::daemon {
 
@@ -172,6 +173,12 @@ RefPoint JogSource::step(const Eigen::Vector3d& ref_mm, const LiveLimits& lim, d
   if (!active_) return r;
   const auto a = static_cast<std::size_t>(axis_);
   const double acc = lim.max_accel_mm_s2[a];
+  // A jog stays inside the live soft limits: it stops at a limit (which may have moved since the
+  // jog was accepted: SIGHUP). Outside a limit it may only move back in, never further out, and
+  // the clamp never turns a jog around.
+  const double here = ref_mm[axis_];
+  if (target_mm_ > here) target_mm_ = std::min(target_mm_, std::max(lim.max_mm[a], here));
+  if (target_mm_ < here) target_mm_ = std::max(target_mm_, std::min(lim.min_mm[a], here));
   const double rem = target_mm_ - ref_mm[axis_];
   const double dir = rem >= 0.0 ? 1.0 : -1.0;
   const double v_brake = std::sqrt(2.0 * acc * std::abs(rem));
@@ -202,24 +209,82 @@ RefPoint HoldSource::step(const Feedback& fb, bool servo) noexcept {
 // ---------------------------------------------------------------------------------------------
 // StopSource
 
-RefPoint StopSource::step(const Feedback& fb, const std::array<double, kMaxAxes>& v_cmd_prev_mm_s,
-                          double stop_decel_mm_s2, double period_s, int axes) noexcept {
+void StopSource::start(const std::array<double, kMaxAxes>& v0_mm_s, int axes) noexcept {
+  axes_ = axes;
+  v0_.fill(0.0);
+  double sq = 0.0;
+  for (int i = 0; i < axes && i < kMaxAxes; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    v0_[a] = std::isfinite(v0_mm_s[a]) ? v0_mm_s[a] : 0.0;
+    sq += v0_[a] * v0_[a];
+  }
+  speed0_ = std::sqrt(sq);
+  ramp_speed_ = speed0_;
+  settle_s_ = still_s_ = 0.0;
+  moving_axis_ = -1;
+  moving_speed_ = 0.0;
+  timed_out_ = false;
+  phase_ = speed0_ > 0.0 ? Phase::kRamp : Phase::kSettle;
+}
+
+RefPoint StopSource::step(const Feedback& fb, const LiveLimits& lim, double period_s) noexcept {
   RefPoint r;
   r.source = SourceKind::kStop;
   r.position_mm = fb.act_mm;
   r.track = false;
-  double speed = 0.0;
-  for (int i = 0; i < axes; ++i) {
-    const double v = v_cmd_prev_mm_s[static_cast<std::size_t>(i)];
-    speed += v * v;
+  timed_out_ = false;
+  if (phase_ == Phase::kRamp) {
+    ramp_speed_ = std::max(0.0, ramp_speed_ - lim.stop_decel_mm_s2 * period_s);
+    const double scale = speed0_ > 0.0 ? ramp_speed_ / speed0_ : 0.0;
+    for (int i = 0; i < axes_; ++i) {
+      const auto a = static_cast<std::size_t>(i);
+      r.velocity_mm_s[a] = v0_[a] * scale;
+    }
+    if (ramp_speed_ <= 0.0) phase_ = Phase::kSettle;
+    r.drives_on = true;
+    return r;
   }
-  speed = std::sqrt(speed);
-  const double next = std::max(0.0, speed - stop_decel_mm_s2 * period_s);
-  const double scale = speed > 0.0 ? next / speed : 0.0;
-  for (std::size_t i = 0; i < r.velocity_mm_s.size(); ++i) r.velocity_mm_s[i] = v_cmd_prev_mm_s[i] * scale;
-  r.drives_on = next > 0.0;
-  done_ = !r.drives_on;
+  if (phase_ == Phase::kSettle) {
+    settle_s_ += period_s;
+    bool still = true;
+    moving_axis_ = -1;
+    moving_speed_ = 0.0;
+    for (int i = 0; i < axes_; ++i) {
+      const AxisFeedback& ax = fb.bus.axis[static_cast<std::size_t>(i)];
+      const double v = std::abs(ax.velocity_mm_s);
+      // Stale feedback proves nothing: the axis counts as moving until a fresh reading says not.
+      if (!ax.fresh || !(v < lim.standstill_velocity_mm_s)) {
+        still = false;
+        if (!ax.fresh || v >= moving_speed_) {
+          moving_axis_ = i;
+          moving_speed_ = ax.fresh ? v : std::numeric_limits<double>::quiet_NaN();
+        }
+      }
+    }
+    still_s_ = still ? still_s_ + period_s : 0.0;
+    if (still && still_s_ >= lim.standstill_time_s - 1e-12) {
+      phase_ = Phase::kOff;
+    } else if (settle_s_ > lim.standstill_timeout_s) {
+      phase_ = Phase::kQuickStop;
+      timed_out_ = true;
+    } else {
+      r.drives_on = true;  // zero command, the drives' velocity loops brake
+      return r;
+    }
+  }
+  r.quick_stop = phase_ == Phase::kQuickStop;
+  r.drives_on = false;
   return r;
+}
+
+const char* to_string(StopSource::Phase p) noexcept {
+  switch (p) {
+    case StopSource::Phase::kRamp: return "ramp";
+    case StopSource::Phase::kSettle: return "settle";
+    case StopSource::Phase::kOff: return "off";
+    case StopSource::Phase::kQuickStop: return "quick_stop";
+  }
+  return "?";
 }
 
 }  // namespace contour::daemon

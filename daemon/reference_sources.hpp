@@ -7,8 +7,9 @@
 //   JogSource      READY, a jog in progress: one axis to a target, trapezoidal at the axis limits
 //   HoldSource     READY otherwise: the reference stays; DISABLED/ENABLING/ESTOP: it follows the
 //                  measured position (the drives do not servo)
-//   StopSource     FAULT: the controlled stop, the commanded velocity ramped down at
-//                  safety.stop_decel_mm_s2, then the drives are disabled
+//   StopSource     FAULT, and DISABLED while the drives still run: the controlled stop, each
+//                  axis ramped down monotonically from a velocity it really has at
+//                  safety.stop_decel_mm_s2, then the drives disabled at standstill
 //
 // Each is a small class: start() (non-RT or at a cycle boundary), a noexcept, allocation-free
 // step() and done(). What a step wants from the state machine (a hold at M0, a stop after a
@@ -151,18 +152,50 @@ class HoldSource {
   Eigen::Vector3d held_mm_ = Eigen::Vector3d::Zero();
 };
 
-// The controlled stop (FAULT): the commanded velocity vector is ramped down at stop_decel along
-// its direction, the reference follows the measured position; the drives stay enabled until the
-// command reaches zero (done()).
+// The controlled stop (FAULT) and the power-down of `disable` / SIGTERM (issue 16: a stop never
+// adds energy; power stages off only at standstill). Three phases:
+//   ramp    each axis' velocity command goes linearly from v0 (a velocity the axis really has,
+//           chosen by the loop: ServoLoop::stop_velocity) to zero; all axes reach zero together,
+//           so the direction of motion stays that of v0 (on a line of the path the tool stays on
+//           it; on an arc it leaves along the tangent by at most d^2 / (2 R), d = |v0|^2 / (2 a));
+//           the path speed falls at the live safety.stop_decel_mm_s2, each axis at that times
+//           |v0_i| / |v0| <= the stop deceleration: |command| never increases on any axis.
+//   settle  zero command, drives still enabled (their velocity loops brake what the lag left),
+//           until every axis' measured speed (fresh feedback only) stays below
+//           safety.standstill_velocity_mm_s for safety.standstill_time_s;
+//   off     drives disabled (done());
+//   quick_stop  the settle phase took longer than safety.standstill_timeout_s: the drives get the
+//           CiA 402 quick stop (their own ramp, then disabled by the drive); timed_out() says so
+//           once, naming the axis that still moved.
+// The reference follows the measured position (the controllers do not servo). Starts in `off`.
 class StopSource {
  public:
-  void start() noexcept { done_ = false; }
-  RefPoint step(const Feedback& fb, const std::array<double, kMaxAxes>& v_cmd_prev_mm_s,
-                double stop_decel_mm_s2, double period_s, int axes) noexcept;
-  [[nodiscard]] bool done() const noexcept { return done_; }
+  enum class Phase : std::uint8_t { kRamp, kSettle, kOff, kQuickStop };
+
+  // Cycle boundary: the stop begins with these per-axis velocities (mm/s).
+  void start(const std::array<double, kMaxAxes>& v0_mm_s, int axes) noexcept;
+  RefPoint step(const Feedback& fb, const LiveLimits& lim, double period_s) noexcept;
+  [[nodiscard]] bool done() const noexcept { return phase_ == Phase::kOff || phase_ == Phase::kQuickStop; }
+  [[nodiscard]] Phase phase() const noexcept { return phase_; }
+  // The standstill timeout fired in the last step (true once per stop).
+  [[nodiscard]] bool timed_out() const noexcept { return timed_out_; }
+  // The axis that moved fastest in the last settle step, and its speed (mm/s).
+  [[nodiscard]] int moving_axis() const noexcept { return moving_axis_; }
+  [[nodiscard]] double moving_speed_mm_s() const noexcept { return moving_speed_; }
+  [[nodiscard]] const std::array<double, kMaxAxes>& start_velocity_mm_s() const noexcept { return v0_; }
 
  private:
-  bool done_ = false;
+  std::array<double, kMaxAxes> v0_{};
+  double speed0_ = 0.0;      // |v0|
+  double ramp_speed_ = 0.0;  // path speed of the ramp now
+  double settle_s_ = 0.0;    // time in the settle phase
+  double still_s_ = 0.0;     // time every axis has been below the standstill speed
+  int axes_ = 0;
+  int moving_axis_ = -1;
+  double moving_speed_ = 0.0;
+  bool timed_out_ = false;
+  Phase phase_ = Phase::kOff;
 };
+const char* to_string(StopSource::Phase p) noexcept;
 
 }  // namespace contour::daemon

@@ -110,6 +110,8 @@ class CycleClock {
   // Call at the end of the cycle's work: records compute time and overruns.
   void end_cycle(CycleStats& stats, std::int64_t wake_ns) noexcept;
   [[nodiscard]] std::int64_t period_ns() const noexcept { return period_ns_; }
+  // The deadline the last wait_next() slept to (ns, MONOTONIC).
+  [[nodiscard]] std::int64_t deadline_ns() const noexcept { return deadline_ns_; }
 
  private:
   std::int64_t period_ns_;

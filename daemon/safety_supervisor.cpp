@@ -13,10 +13,17 @@ LiveLimits live_limits_from(const config::Config& cfg) {
   l.min_ferror_mm = cfg.safety.min_ferror_mm;
   l.contour_error_limit_mm = cfg.safety.contour_error_limit_mm;
   l.stop_decel_mm_s2 = cfg.safety.stop_decel_mm_s2;
+  l.standstill_velocity_mm_s = cfg.safety.standstill_velocity_mm_s;
+  l.standstill_time_s = cfg.safety.standstill_time_s;
+  l.standstill_timeout_s = cfg.safety.standstill_timeout_s;
+  l.feed_override_max = cfg.interpolator.feed_override_max_percent / 100.0;
+  l.jog_max_velocity_mm_s = cfg.safety.jog_max_velocity_mm_min / 60.0;
   for (std::size_t i = 0; i < 3; ++i) {
     if (i < cfg.machine.axes.size()) {
       l.max_velocity_mm_s[i] = cfg.machine.axes[i].max_velocity_mm_min / 60.0;
       l.max_accel_mm_s2[i] = cfg.machine.axes[i].max_accel_mm_s2;
+      l.min_mm[i] = cfg.machine.axes[i].min_mm;
+      l.max_mm[i] = cfg.machine.axes[i].max_mm;
     } else {
       l.max_velocity_mm_s[i] = 1.0;
       l.max_accel_mm_s2[i] = 1.0;
@@ -35,13 +42,51 @@ void validate(const LiveLimits& l, int axes) {
   positive(l.min_ferror_mm, "safety.min_ferror_mm");
   positive(l.contour_error_limit_mm, "safety.contour_error_limit_mm");
   positive(l.stop_decel_mm_s2, "safety.stop_decel_mm_s2");
+  positive(l.standstill_velocity_mm_s, "safety.standstill_velocity_mm_s");
+  positive(l.standstill_timeout_s, "safety.standstill_timeout_s");
+  positive(l.feed_override_max, "interpolator.feed_override_max_percent");
+  positive(l.jog_max_velocity_mm_s, "safety.jog_max_velocity_mm_min");
+  if (!std::isfinite(l.standstill_time_s) || l.standstill_time_s < 0.0 ||
+      l.standstill_time_s >= l.standstill_timeout_s) {
+    throw std::invalid_argument(
+        "limits: safety.standstill_time_s must be >= 0 and < safety.standstill_timeout_s");
+  }
   if (l.min_ferror_mm > l.ferror_mm) {
     throw std::invalid_argument("limits: safety.min_ferror_mm must be <= safety.ferror_mm");
   }
   for (int i = 0; i < axes && i < 3; ++i) {
     const auto a = static_cast<std::size_t>(i);
-    positive(l.max_velocity_mm_s[a], "machine.axes[" + std::to_string(i) + "].max_velocity");
-    positive(l.max_accel_mm_s2[a], "machine.axes[" + std::to_string(i) + "].max_accel_mm_s2");
+    const std::string ax = "machine.axes[" + std::to_string(i) + "]";
+    positive(l.max_velocity_mm_s[a], ax + ".max_velocity");
+    positive(l.max_accel_mm_s2[a], ax + ".max_accel_mm_s2");
+    if (std::isnan(l.min_mm[a]) || std::isnan(l.max_mm[a]) || !(l.min_mm[a] < l.max_mm[a])) {
+      throw std::invalid_argument("limits: " + ax + ".min_mm must be < max_mm");
+    }
+  }
+}
+
+double following_band_mm(const LiveLimits& l, int axis, double v_ref_mm_s) noexcept {
+  const auto a = static_cast<std::size_t>(axis);
+  return std::min(l.ferror_mm, l.min_ferror_mm + (l.ferror_mm - l.min_ferror_mm) *
+                                                     std::abs(v_ref_mm_s) / l.max_velocity_mm_s[a]);
+}
+
+std::string describe(const ResetBlock& b) {
+  const std::string who = b.node > 0 ? "node " + std::to_string(b.node)
+                          : b.axis >= 0 ? "axis " + std::to_string(b.axis)
+                                        : std::string();
+  switch (b.cause) {
+    case FaultCause::kNone: return "nothing";
+    case FaultCause::kHeartbeatLost:
+      return "no heartbeat from " + who + " since it was lost (the drive must be heard again)";
+    case FaultCause::kDriveFault:
+      return "the drive of " + who + " still reports a fault (CiA 402 fault bit set after the fault-reset edge)";
+    case FaultCause::kNmtStateChange:
+      return "the drive of " + who + " is not NMT operational";
+    case FaultCause::kSpindleFault: return "the spindle drive still reports a fault";
+    case FaultCause::kBusError: return "the CAN bus is still in error (bus-off / error passive)";
+    case FaultCause::kEstopInput: return "the E-stop input is still asserted";
+    default: return std::string(to_string(b.cause)) + (who.empty() ? "" : " (" + who + ")");
   }
 }
 
@@ -52,10 +97,6 @@ SafetySupervisor::SafetySupervisor(const config::Config& cfg, bool force_stale_f
       spindle_timeout_s_(cfg.spindle.at_speed_timeout_s),
       force_stale_faults_(force_stale_faults) {
   if (axes_ < 1 || axes_ > 3) throw std::invalid_argument("safety supervisor: 1 to 3 axes");
-  for (std::size_t i = 0; i < cfg.machine.axes.size(); ++i) {
-    min_mm_[i] = cfg.machine.axes[i].min_mm;
-    max_mm_[i] = cfg.machine.axes[i].max_mm;
-  }
 }
 
 FaultReport SafetySupervisor::check_estop(const Feedback& fb) const noexcept {
@@ -64,39 +105,54 @@ FaultReport SafetySupervisor::check_estop(const Feedback& fb) const noexcept {
 }
 
 FaultReport SafetySupervisor::check_bus(const Feedback& fb, bool servo) const noexcept {
+  // First what a drive SAID (fault bit, NMT change) on any axis, then what the master only
+  // inferred (left operation enabled, missed TPDOs): a drive that reboots also stops sending its
+  // TPDOs, and the FAULT's cause must be the event, not the silence that follows it. An EMCY
+  // alone is a warning (drives report temperature or voltage warnings that way): it becomes the
+  // cause when the drive then stops following (fault bit, disabled, TPDOs missing).
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
     const AxisFeedback& ax = fb.bus.axis[a];
-    if (ax.fault) return {FaultCause::kDriveFault, i, 1.0, 0.0};
+    if (ax.fault) return {FaultCause::kDriveFault, i, static_cast<double>(ax.emcy_code), 0.0};
+    if (ax.nmt_lost) return {FaultCause::kNmtStateChange, i, static_cast<double>(ax.node_id), 0.0};
+  }
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    const AxisFeedback& ax = fb.bus.axis[a];
     // A drive that leaves operation enabled without a fault (its enable input or STO opened, a
     // local operator, a stray controlword) no longer follows the commands: stop everything.
     // The master would otherwise walk it back to operation enabled on its own.
-    if (servo && ax.fresh && !ax.enabled) return {FaultCause::kDriveDisabled, i, 1.0, 0.0};
+    const bool disabled = servo && ax.fresh && !ax.enabled;
+    const bool silent = fb.missed_streak[a] >= missed_tpdo_streak_;
+    if ((disabled || silent) && ax.emcy_code != 0) {
+      return {FaultCause::kDriveEmcy, i, static_cast<double>(ax.emcy_code), 0.0};
+    }
+    if (disabled) return {FaultCause::kDriveDisabled, i, 1.0, 0.0};
+  }
+  if (fb.bus.spindle.fault) return {FaultCause::kSpindleFault, -1, fb.bus.spindle.actual_rpm, 0.0};
+  if (fb.bus.heartbeat_lost) return {FaultCause::kHeartbeatLost, fb.bus.heartbeat_lost_node, 1.0, 0.0};
+  if (fb.bus.bus_error) return {FaultCause::kBusError, -1, 1.0, 0.0};
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
     if (fb.missed_streak[a] >= missed_tpdo_streak_) {
       return {FaultCause::kMissedTpdo, i, static_cast<double>(fb.missed_streak[a]),
               static_cast<double>(missed_tpdo_streak_)};
     }
   }
-  if (fb.bus.spindle.fault) return {FaultCause::kSpindleFault, -1, fb.bus.spindle.actual_rpm, 0.0};
-  if (fb.bus.heartbeat_lost) return {FaultCause::kHeartbeatLost, fb.bus.heartbeat_lost_node, 1.0, 0.0};
-  if (fb.bus.bus_error) return {FaultCause::kBusError, -1, 1.0, 0.0};
   return {};
 }
 
 FaultReport SafetySupervisor::check_motion(const Eigen::Vector3d& ref_mm, const Eigen::Vector3d& act_mm,
                                            const Eigen::Vector3d& v_ref_mm_s, double eps_norm_mm,
                                            const LiveLimits& lim) const noexcept {
-  const double fe = lim.ferror_mm, mfe = lim.min_ferror_mm;
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
-    // LinuxCNC: the allowed following error grows linearly with the commanded speed from
-    // MIN_FERROR at standstill to FERROR at the axis' maximum velocity.
-    const double band =
-        std::min(fe, mfe + (fe - mfe) * std::abs(v_ref_mm_s[i]) / lim.max_velocity_mm_s[a]);
+    const double band = following_band_mm(lim, i, v_ref_mm_s[i]);
     const double err = std::abs(ref_mm[i] - act_mm[i]);
     if (err > band) return {FaultCause::kFollowingError, i, err, band};
-    if (ref_mm[i] < min_mm_[a] - 1e-9 || ref_mm[i] > max_mm_[a] + 1e-9) {
-      return {FaultCause::kSoftLimit, i, ref_mm[i], ref_mm[i] < min_mm_[a] ? min_mm_[a] : max_mm_[a]};
+    // The live soft limits (machine coordinates), as swapped in at the last cycle boundary.
+    if (ref_mm[i] < lim.min_mm[a] - 1e-9 || ref_mm[i] > lim.max_mm[a] + 1e-9) {
+      return {FaultCause::kSoftLimit, i, ref_mm[i], ref_mm[i] < lim.min_mm[a] ? lim.min_mm[a] : lim.max_mm[a]};
     }
   }
   if (eps_norm_mm > lim.contour_error_limit_mm) {
@@ -119,10 +175,17 @@ FaultReport SafetySupervisor::check_force_stale(bool fallback_now, double age_s,
   return {};
 }
 
-bool SafetySupervisor::causes_gone(const Feedback& fb, bool estop_tripped) const noexcept {
-  bool gone = !fb.bus.heartbeat_lost && !fb.bus.bus_error && !estop_tripped;
-  for (int i = 0; i < axes_; ++i) gone = gone && !fb.bus.axis[static_cast<std::size_t>(i)].fault;
-  return gone && !fb.bus.spindle.fault;
+ResetBlock SafetySupervisor::reset_block(const Feedback& fb, bool estop_tripped) const noexcept {
+  if (estop_tripped) return {FaultCause::kEstopInput, -1, 0};
+  for (int i = 0; i < axes_; ++i) {
+    const AxisFeedback& ax = fb.bus.axis[static_cast<std::size_t>(i)];
+    if (ax.fault) return {FaultCause::kDriveFault, i, ax.node_id};
+    if (ax.nmt_lost) return {FaultCause::kNmtStateChange, i, ax.node_id};
+  }
+  if (fb.bus.spindle.fault) return {FaultCause::kSpindleFault, -1, 0};
+  if (fb.bus.heartbeat_lost) return {FaultCause::kHeartbeatLost, -1, fb.bus.heartbeat_lost_node};
+  if (fb.bus.bus_error) return {FaultCause::kBusError, -1, 0};
+  return {};
 }
 
 }  // namespace contour::daemon

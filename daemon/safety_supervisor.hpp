@@ -10,6 +10,7 @@
 // names (mm, mm/s, s, rpm).
 #include <array>
 #include <cstdint>
+#include <string>
 
 #include <Eigen/Core>
 
@@ -19,7 +20,9 @@
 
 namespace contour::daemon {
 
-// Safety limits that may change live (SIGHUP, swapped like the gains). Units in the names.
+// Safety limits that may change live (SIGHUP, swapped like the gains at a cycle boundary and
+// enforced from that cycle on: the loop, its sources and the supervisor read only this copy).
+// Units in the names; positions in machine coordinates.
 struct LiveLimits {
   double ferror_mm = 1.0;
   double min_ferror_mm = 0.1;
@@ -27,10 +30,23 @@ struct LiveLimits {
   double stop_decel_mm_s2 = 1000.0;
   std::array<double, 3> max_velocity_mm_s{};
   std::array<double, 3> max_accel_mm_s2{};
+  std::array<double, 3> min_mm{-1e300, -1e300, -1e300};  // soft limits
+  std::array<double, 3> max_mm{1e300, 1e300, 1e300};
+  double standstill_velocity_mm_s = 1.0;
+  double standstill_time_s = 0.05;
+  double standstill_timeout_s = 2.0;
+  double feed_override_max = 1.5;          // ratio (interpolator.feed_override_max_percent / 100)
+  double jog_max_velocity_mm_s = 50.0;     // safety.jog_max_velocity_mm_min / 60
+  bool operator==(const LiveLimits&) const = default;
 };
 LiveLimits live_limits_from(const config::Config& cfg);
-// Throws std::invalid_argument naming the field (non-finite, <= 0, min_ferror > ferror).
+// Throws std::invalid_argument naming the field (non-finite, <= 0, min_ferror > ferror,
+// min_mm >= max_mm).
 void validate(const LiveLimits& l, int axes);
+
+// LinuxCNC's following-error band for an axis at reference speed |v|: MIN_FERROR at standstill
+// growing linearly to FERROR at the axis' maximum velocity.
+double following_band_mm(const LiveLimits& l, int axis, double v_ref_mm_s) noexcept;
 
 struct FaultReport {
   FaultCause cause = FaultCause::kNone;
@@ -39,6 +55,16 @@ struct FaultReport {
   double limit = 0.0;
   explicit operator bool() const noexcept { return cause != FaultCause::kNone; }
 };
+
+// Why a reset cannot be accepted yet (ServoLoop publishes it; `reset` names it in its refusal).
+struct ResetBlock {
+  FaultCause cause = FaultCause::kNone;  // kNone: nothing blocks
+  int axis = -1;                          // axis index, or -1
+  int node = 0;                           // CANopen node-id when known (heartbeat: the silent node)
+  explicit operator bool() const noexcept { return cause != FaultCause::kNone; }
+};
+// "the heartbeat of node 2 has not been seen since it was lost" (non-RT text).
+std::string describe(const ResetBlock& b);
 
 class SafetySupervisor {
  public:
@@ -74,16 +100,19 @@ class SafetySupervisor {
                                               double stale_age_s) const noexcept;
 
   // Reset rule: every cause that latched a FAULT/ESTOP is gone in this snapshot (no heartbeat
-  // loss, no bus error, E-stop input released, no drive or spindle fault bit).
-  [[nodiscard]] bool causes_gone(const Feedback& fb, bool estop_tripped) const noexcept;
+  // loss — the bus keeps that latched until a heartbeat arrived after the loss —, no bus error,
+  // E-stop input released, no drive or spindle fault bit, no unacknowledged EMCY / NMT change).
+  // Otherwise the first condition still missing: cause, axis (-1: spindle/bus/E-stop) or node.
+  [[nodiscard]] ResetBlock reset_block(const Feedback& fb, bool estop_tripped) const noexcept;
+  [[nodiscard]] bool causes_gone(const Feedback& fb, bool estop_tripped) const noexcept {
+    return !reset_block(fb, estop_tripped);
+  }
 
   [[nodiscard]] int axes() const noexcept { return axes_; }
 
  private:
   int axes_ = 3;
   double period_s_ = 0.001;
-  std::array<double, 3> min_mm_{-1e300, -1e300, -1e300};
-  std::array<double, 3> max_mm_{1e300, 1e300, 1e300};
   int missed_tpdo_streak_ = 5;
   double spindle_timeout_s_ = 10.0;
   bool force_stale_faults_ = false;

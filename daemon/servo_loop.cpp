@@ -46,6 +46,9 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
   for (std::size_t i = 0; i < 3 && i < cfg.machine.axes.size(); ++i) {
     gain_per_s_[i] = cfg.machine.axes[i].drive.gain_per_s;
     tau_s_[i] = cfg.machine.axes[i].drive.tau_s;
+    // Velocity-loop lag over one period: the estimate of the axis velocity while its feedback is
+    // stale (v_est += (v_cmd - v_est) * lag_alpha), the acceleration clamp's reference then.
+    lag_alpha_[i] = tau_s_[i] > 0.0 ? 1.0 - std::exp(-period_s_ / tau_s_[i]) : 1.0;
   }
   limits_ = live_limits_from(cfg);
   validate(limits_, axes_);
@@ -152,7 +155,7 @@ void ServoLoop::raise_fault(const FaultReport& f) noexcept {
   transition(t, f.cause);
   detach_job(false);
   jog_.cancel();
-  stop_.start();
+  stop_.start(stop_velocity(), axes_);
 }
 
 void ServoLoop::detach_job(bool ok) noexcept {
@@ -178,6 +181,32 @@ void ServoLoop::hold_here() noexcept {
   jog_.cancel();
 }
 
+// The velocity each axis really has, for the start of a controlled stop (issue 16: the ramp
+// used to start from the last COMMAND, which carries the coupling derivative's chatter: on a drive
+// fault Z went from 3.3 to 21 mm/s). While the axis tracked its reference (servo, feedback fresh,
+// following error inside its band) the reference velocity is both real and smooth; otherwise the
+// measured velocity when fresh, else the drive-model estimate. Never more than, nor opposite to,
+// what the drive was last told: from the fault on no axis' |command| increases.
+std::array<double, kMaxAxes> ServoLoop::stop_velocity() const noexcept {
+  std::array<double, kMaxAxes> v{};
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    const AxisFeedback& ax = fb_.bus.axis[a];
+    const bool tracking = last_servo_ && ax.fresh &&
+                          std::abs(ref_[i] - fb_.act_mm[i]) <= following_band_mm(limits_, i, v_ref_[i]);
+    double vi = tracking ? v_ref_[i] : ax.fresh ? ax.velocity_mm_s : v_est_[a];
+    if (!std::isfinite(vi)) vi = 0.0;
+    const double c = v_cmd_[a];
+    if (vi * c <= 0.0) {
+      vi = 0.0;
+    } else if (std::abs(vi) > std::abs(c)) {
+      vi = c;
+    }
+    v[a] = vi;
+  }
+  return v;
+}
+
 void ServoLoop::enter_estop(FaultCause cause) noexcept {
   const Transition t = sm_.estop(cause);
   if (!t.accepted) return;
@@ -196,9 +225,17 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
     case CommandKind::kEnable:
       transition(sm_.apply(Request::kEnable), FaultCause::kNone);
       break;
-    case CommandKind::kDisable:
-      transition(sm_.apply(Request::kDisable), FaultCause::kNone);
+    case CommandKind::kDisable: {
+      const Transition t = sm_.apply(Request::kDisable);
+      if (t.accepted && t.from != t.to) {
+        // The drives are switched off only at standstill: a moving axis (a jog) is ramped down
+        // first, like a fault's controlled stop.
+        jog_.cancel();
+        stop_.start(stop_velocity(), axes_);
+      }
+      transition(t, FaultCause::kNone);
       break;
+    }
     case CommandKind::kAttachJob:
       if (st == MachineState::kRunning || st == MachineState::kHold || c.job == nullptr) {
         refuse();
@@ -269,7 +306,7 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       break;
     }
     case CommandKind::kSetOverride:
-      feed_override_ = std::clamp(c.a, 0.0, cfg_.interpolator.feed_override_max_percent / 100.0);
+      feed_override_ = std::clamp(std::isfinite(c.a) ? c.a : 0.0, 0.0, limits_.feed_override_max);
       break;
     case CommandKind::kRecordFlag:
       recording_ = c.a != 0.0;
@@ -305,8 +342,8 @@ void ServoLoop::refuse_command(CommandKind k) noexcept {
 }
 
 bool ServoLoop::try_reset() noexcept {
-  const bool gone = supervisor_.causes_gone(fb_, io_ != nullptr && io_->estop_tripped());
-  const Transition t = sm_.reset(gone);
+  reset_block_ = supervisor_.reset_block(fb_, io_ != nullptr && io_->estop_tripped());
+  const Transition t = sm_.reset(!reset_block_);
   if (!t.accepted) return false;
   ++resets_;
   transition(t, FaultCause::kNone);
@@ -340,12 +377,13 @@ void ServoLoop::cycle() noexcept {
   const bool servo = st == MachineState::kReady || st == MachineState::kRunning ||
                      st == MachineState::kHold;
   const RefPoint r = reference(st, servo);
-  const Eigen::Vector3d v_ref = (ref_ - ref_prev_) / period_s_;  // control and following error
+  v_ref_ = (ref_ - ref_prev_) / period_s_;  // control, following error, a stop's start
   double eps_norm = 0.0;
-  AxisCommands out = control_step(r, st, servo, v_ref, eps_norm);
+  AxisCommands out = control_step(r, st, servo, v_ref_, eps_norm);
   channels(st, out);
   write(out);
-  supervise(st, servo, v_ref, eps_norm);
+  last_servo_ = servo;
+  supervise(st, servo, v_ref_, eps_norm);
   publish_cycle();
   ++cycle_;
 }
@@ -374,10 +412,15 @@ void ServoLoop::read() noexcept {
     if (fb_.bus.axis[a].fresh) {
       fb_.act_mm[i] = fb_.bus.axis[a].position_mm;
       fb_.missed_streak[a] = 0;
+      v_est_[a] = fb_.bus.axis[a].velocity_mm_s;
     } else {
       ++fb_.missed_streak[a];
       ++missed_tpdos_;
+      // The drive still follows the last command it got, through its velocity-loop lag.
+      const double commanded = out_.mode == DriveMode::kEnabled ? out_.velocity_mm_s[a] : 0.0;
+      v_est_[a] += (commanded - v_est_[a]) * lag_alpha_[a];
     }
+    if (!std::isfinite(v_est_[a])) v_est_[a] = 0.0;
   }
   if (io_ != nullptr) {
     fb_.force = io_->read_force();
@@ -420,6 +463,8 @@ SourceKind ServoLoop::select_source(MachineState st) const noexcept {
   if (in_program(st)) return SourceKind::kProgram;
   if (jog_.active() && st == MachineState::kReady) return SourceKind::kJog;
   if (st == MachineState::kFault) return SourceKind::kStop;
+  // `disable`: the drives are still on until the axes stand still.
+  if (st == MachineState::kDisabled && !stop_.done()) return SourceKind::kStop;
   return SourceKind::kHold;
 }
 
@@ -435,7 +480,14 @@ RefPoint ServoLoop::reference(MachineState st, bool servo) noexcept {
     case SourceKind::kJog: r = jog_.step(ref_, limits_, period_s_); break;
     case SourceKind::kHold: r = hold_.step(fb_, servo); break;
     case SourceKind::kStop:
-      r = stop_.step(fb_, v_cmd_, limits_.stop_decel_mm_s2, period_s_, axes_);
+      r = stop_.step(fb_, limits_, period_s_);
+      if (stop_.timed_out()) {
+        // The axes did not come to rest: the drives' own quick stop takes over (a second cause
+        // while FAULT keeps the first; counted and logged with the axis still moving).
+        ++fault_counts_[static_cast<std::size_t>(FaultCause::kStandstillTimeout)];
+        emit(EventKind::kStandstillTimeout, FaultCause::kStandstillTimeout, stop_.moving_axis(),
+             stop_.moving_speed_mm_s(), limits_.standstill_timeout_s);
+      }
       break;
   }
   ref_ = r.position_mm;
@@ -507,9 +559,12 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
       // limit at 2000 mm/s^2 turned that into phase lag and made the Table 2 run unstable
       // (contour error 1.1 mm, FAULT). Like the velocity clamp it is a last-line limit the
       // controller is not told about; it does not engage on Table 2 (status accel_clamps).
-      if (fb_.bus.axis[a].fresh && tau_s_[a] > 0.0) {
+      // Whatever the feedback's freshness (issue 16: with stale feedback the clamp was skipped and
+      // X got its velocity limit for 2 cycles): a stale axis is clamped around the drive-model
+      // estimate of its velocity.
+      if (tau_s_[a] > 0.0) {
         const double dv = limits_.max_accel_mm_s2[a] * tau_s_[a];
-        const double va = fb_.bus.axis[a].velocity_mm_s;
+        const double va = v_est_[a];
         if (v > va + dv || v < va - dv) {
           v = std::clamp(v, va - dv, va + dv);
           ++accel_clamps_;
@@ -518,10 +573,13 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
       v_cmd_[a] = v;
     }
     out.mode = DriveMode::kEnabled;
-  } else if (st == MachineState::kFault) {
-    // Controlled stop (StopSource): the ramped velocity, then the drives disabled.
+  } else if (r.source == SourceKind::kStop) {
+    // Controlled stop (StopSource): the ramped velocity, zero until standstill, then the drives
+    // disabled (or, after the standstill timeout, their quick stop).
     v_cmd_ = r.velocity_mm_s;
-    out.mode = r.drives_on ? DriveMode::kEnabled : DriveMode::kDisabled;
+    out.mode = r.quick_stop ? DriveMode::kQuickStop
+               : r.drives_on ? DriveMode::kEnabled
+                             : DriveMode::kDisabled;
     eps_.setZero();
   } else if (st == MachineState::kEstop) {
     v_cmd_.fill(0.0);
@@ -610,6 +668,7 @@ void ServoLoop::publish_cycle() noexcept {
     s.force_N = fb_.force_N;
     s.force_override = force_.feed_override();
     s.spindle_rpm = force_.spindle_rpm_cmd();
+    s.lateness_us = lateness_us_;
     telemetry_.push(s);
   }
   publish();
@@ -686,6 +745,10 @@ void ServoLoop::publish() noexcept {
   pub_.out_mist = attached && io.mist && sm_.state() != MachineState::kEstop;
   pub_.out_flood = attached && io.flood && sm_.state() != MachineState::kEstop;
   pub_.estop_input = fb_.estop_input;
+  pub_.stop_phase = stop_.phase();
+  pub_.reset_block = reset_block_;
+  pub_.soft_min_mm = limits_.min_mm;
+  pub_.soft_max_mm = limits_.max_mm;
   std::atomic_thread_fence(std::memory_order_release);
   seq_.store(s0 + 2, std::memory_order_release);
 }
@@ -709,6 +772,7 @@ void ServoLoop::run(const std::atomic<bool>& stop) noexcept {
   clock.start();
   while (!stop.load(std::memory_order_acquire)) {
     const std::int64_t wake = clock.wait_next(stats_);
+    lateness_us_ = static_cast<float>(static_cast<double>(wake - clock.deadline_ns()) * 1e-3);
     cycle();
     clock.end_cycle(stats_, wake);
   }

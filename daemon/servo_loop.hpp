@@ -83,6 +83,8 @@ enum class EventKind : std::uint8_t {
   kForceRecovered, // a valid sample again after a fallback (force control stays off until `force on`)
   kLimitsSwapped,
   kSpindleAtSpeed, // a feed move waited for the spindle: value = wait s, limit = actual rpm
+  kStandstillTimeout,  // a stop's axes did not come to rest: axis, value = speed mm/s (NaN: no
+                       // fresh feedback), limit = safety.standstill_timeout_s; quick stop now
 };
 
 // Fixed-size event record (RT -> logger thread).
@@ -117,6 +119,7 @@ struct TelemetrySample {
   double force_N = 0.0;     // averaged (filtered) resultant force, 0 without a dynamometer
   double force_override = 1.0;
   double spindle_rpm = 0.0;
+  float lateness_us = 0.0F;  // wake-up lateness of this cycle (0 when cycle() is stepped by a test)
 };
 
 // Published status (seqlock).
@@ -186,6 +189,11 @@ struct LoopStatus {
   bool out_mist = false;
   bool out_flood = false;
   bool estop_input = false;         // RtIo latch seen by the loop
+  // Stops (issue 16).
+  StopSource::Phase stop_phase = StopSource::Phase::kOff;  // the controlled stop / power-down
+  ResetBlock reset_block{};         // why the last reset was refused (kNone: not refused)
+  std::array<double, 3> soft_min_mm{};  // live soft limits (machine coordinates)
+  std::array<double, 3> soft_max_mm{};
 };
 
 struct LoopOptions {
@@ -258,6 +266,8 @@ class ServoLoop {
   void hold_here() noexcept;  // reference := current measured position, controller state reset
   void publish() noexcept;
   void enter_estop(FaultCause cause) noexcept;
+  // The velocity each axis really has, to start a controlled stop from (see the definition).
+  [[nodiscard]] std::array<double, kMaxAxes> stop_velocity() const noexcept;
   // Every axis drive reports CiA 402 "operation enabled" (this cycle's feedback).
   [[nodiscard]] bool all_axes_enabled() const noexcept;
   [[nodiscard]] bool in_program(MachineState st) const noexcept {
@@ -272,6 +282,7 @@ class ServoLoop {
   double period_s_ = 0.001;
   std::array<double, 3> gain_per_s_{};
   std::array<double, 3> tau_s_{};  // drive velocity-loop lag (acceleration clamp)
+  std::array<double, 3> lag_alpha_{};  // 1 - exp(-T / tau): velocity estimate while stale
   LiveLimits limits_{};  // RT copy
 
   StateMachine sm_;
@@ -313,6 +324,7 @@ class ServoLoop {
 
   // Cycle state.
   std::uint64_t cycle_ = 0;
+  float lateness_us_ = 0.0F;  // set by run() before each cycle
   static constexpr int kResetWindowCycles = 250;  // a pending `reset` waits this long for causes
   int reset_pending_cycles_ = 0;
   Feedback fb_{};
@@ -321,6 +333,10 @@ class ServoLoop {
   Eigen::Vector3d ref_prev_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d eps_ = Eigen::Vector3d::Zero();
   std::array<double, 3> v_cmd_{};
+  std::array<double, kMaxAxes> v_est_{};  // measured velocity, or the drive-model estimate when stale
+  Eigen::Vector3d v_ref_ = Eigen::Vector3d::Zero();  // reference velocity of the last cycle
+  bool last_servo_ = false;                            // the last cycle servoed the axes
+  ResetBlock reset_block_{};                           // why the last reset attempt was refused
   double feed_override_ = 1.0;
   bool recording_ = false;
   int fault_axis_ = -1;

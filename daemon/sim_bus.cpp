@@ -77,6 +77,10 @@ void SimBus::read(BusFeedback& fb) noexcept {
       f.velocity_mm_s = drive_[a].velocity_mm_s();
     }
     f.fresh = true;
+    if (drop_tpdos_[a].load(std::memory_order_relaxed) > 0) {
+      drop_tpdos_[a].fetch_sub(1, std::memory_order_relaxed);
+      f.fresh = false;  // position/velocity hold their last values in the loop's snapshot
+    }
     f.fault = fault_[a];
     f.enabled = mode_ == DriveMode::kEnabled && !f.fault && !disabled_[a];
     f.statusword = f.fault ? 0x0008 : (f.enabled ? 0x0027 : 0x0040);

@@ -46,6 +46,10 @@ class SimBus final : public AxisBus {
   void inject_drive_disabled(int axis, bool on) noexcept {
     disabled_[static_cast<std::size_t>(axis)] = on;
   }
+  // The next `count` TPDOs of an axis do not arrive (stale feedback; a streak faults the loop).
+  void inject_tpdo_drop(int axis, int count) noexcept {
+    drop_tpdos_[static_cast<std::size_t>(axis)] = count;
+  }
   // Spindle model: first-order speed lag tau_s (0 = no spindle). Setup-time only.
   void configure_spindle(double tau_s) noexcept { spindle_tau_s_ = tau_s; }
   // The spindle is jammed / its drive does not follow (stays at its speed).
@@ -63,6 +67,7 @@ class SimBus final : public AxisBus {
   DriveMode received_mode_ = DriveMode::kDisabled;
   std::array<std::atomic<bool>, kMaxAxes> fault_{};
   std::array<std::atomic<bool>, kMaxAxes> disabled_{};
+  std::array<std::atomic<int>, kMaxAxes> drop_tpdos_{};
   double spindle_tau_s_ = 0.0;
   double spindle_rpm_ = 0.0;
   double spindle_latched_rpm_ = 0.0;

@@ -1,8 +1,11 @@
 #include "daemon/telemetry.hpp"
 
+#include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
+#include <string_view>
 
 #include "control/path.hpp"
 
@@ -10,6 +13,103 @@ namespace contour::daemon {
 
 namespace {
 constexpr double kSearchMarginMm = 10.0;  // > following error at max feed on Table 1 (~2.3 mm)
+
+void append_number(std::string& out, double v) {
+  if (!std::isfinite(v)) {
+    out += "null";
+    return;
+  }
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest round-trip form
+  out.append(buf, r.ptr);
+}
+
+void append_number(std::string& out, std::uint64_t v) {
+  char buf[24];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  out.append(buf, r.ptr);
+}
+
+void append_key(std::string& out, std::string_view key) {
+  out += ",\"";
+  out += key;
+  out += "\":";
+}
+
+void append_array(std::string& out, std::string_view key, const std::array<double, 3>& v,
+                  double scale) {
+  append_key(out, key);
+  out += '[';
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    if (i != 0) out += ',';
+    append_number(out, v[i] * scale);
+  }
+  out += ']';
+}
+// A template so that the requires-expression is checked against the sample type as it is.
+template <typename Sample>
+void append_lateness(std::string& out, const Sample& s) {
+  if constexpr (requires { s.lateness_us; }) {
+    append_key(out, "lateness_us");
+    append_number(out, static_cast<double>(s.lateness_us));
+  }
+}
+}  // namespace
+
+std::string encode_stream_sample(const StreamSample& ss) {
+  const TelemetrySample& s = ss.s;
+  std::string out;
+  out.reserve(480);
+  out += "{\"cycle\":";
+  append_number(out, s.cycle);
+  append_key(out, "t_s");
+  append_number(out, s.t_s);
+  append_key(out, "state");
+  out += '"';
+  out += to_string(s.state);  // fixed upper-case names: nothing to escape
+  out += '"';
+  append_key(out, "job");
+  append_number(out, s.job);
+  append_key(out, "line");
+  append_number(out, static_cast<double>(s.line));
+  append_key(out, "in_program");
+  out += s.in_program ? "true" : "false";
+  append_key(out, "progress_mm");
+  append_number(out, s.progress_mm);
+  append_array(out, "ref_mm", s.ref_mm, 1.0);
+  append_array(out, "act_mm", s.act_mm, 1.0);
+  append_array(out, "cmd_mm_s", s.cmd_mm_s, 1.0);
+  append_array(out, "eps_um", s.eps_mm, 1e3);
+  append_key(out, "model_error_um");
+  append_number(out,
+                1e3 * std::sqrt(s.eps_mm[0] * s.eps_mm[0] + s.eps_mm[1] * s.eps_mm[1] +
+                                s.eps_mm[2] * s.eps_mm[2]));
+  append_key(out, "true_error_um");
+  append_number(out, ss.true_contour_error_um);
+  append_key(out, "override");
+  append_number(out, s.override_applied);
+  append_key(out, "force_n");
+  append_number(out, s.force_N);
+  append_key(out, "force_override");
+  append_number(out, s.force_override);
+  append_key(out, "spindle_rpm");
+  append_number(out, s.spindle_rpm);
+  append_key(out, "recording");
+  out += s.recording ? "true" : "false";
+  // Wake-up lateness per cycle: encoded as soon as the loop's sample carries it (issue 21 asks
+  // for it in TelemetrySample; until then the scope takes it from status.timing).
+  append_lateness(out, s);
+  out += '}';
+  return out;
+}
+
+std::shared_ptr<const StreamChunk> make_stream_chunk(std::span<const StreamSample> batch,
+                                                     std::uint64_t ring_dropped) {
+  auto chunk = std::make_shared<StreamChunk>();
+  chunk->items.reserve(batch.size());
+  for (const StreamSample& s : batch) chunk->items.push_back({s.s.cycle, encode_stream_sample(s)});
+  chunk->source_dropped = ring_dropped;
+  return chunk;
 }
 
 double RunStats::rms_contour_error_um() const {
@@ -35,6 +135,7 @@ void TelemetryWriter::start() {
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
     }
     drain();
+    flush_batch(true);
   });
 }
 
@@ -49,8 +150,27 @@ void TelemetryWriter::drain() {
   int n = 0;
   while (ring_.pop(s)) {
     consume(s);
+    if (batch_full_) flush_batch(false);
     if (++n % 4096 == 0) std::this_thread::yield();
   }
+  flush_batch(false);
+}
+
+void TelemetryWriter::flush_batch(bool force) {
+  BatchStream stream;
+  {
+    std::lock_guard lk(mu_);
+    batch_full_ = false;
+    if (batch_.empty() || !batch_stream_) return;
+    if (!force && batch_.size() < batch_samples_ &&
+        std::chrono::steady_clock::now() - batch_started_ < kMaxBatchAge) {
+      return;
+    }
+    out_batch_.clear();
+    out_batch_.swap(batch_);
+    stream = batch_stream_;
+  }
+  stream(std::span<const StreamSample>(out_batch_.data(), out_batch_.size()));
 }
 
 void TelemetryWriter::begin_job(std::uint64_t job) {
@@ -135,6 +255,11 @@ void TelemetryWriter::consume(const TelemetrySample& s) {
   if (stream_ && stream_every_ > 0 && s.cycle % static_cast<std::uint64_t>(stream_every_) == 0) {
     stream_(s);
   }
+  if (batch_stream_) {
+    if (batch_.empty()) batch_started_ = std::chrono::steady_clock::now();
+    batch_.push_back({s, true_um});
+    if (batch_.size() >= batch_samples_) batch_full_ = true;
+  }
   written_.fetch_add(1, std::memory_order_relaxed);
   last_cycle_.store(s.cycle, std::memory_order_release);
 }
@@ -167,6 +292,15 @@ void TelemetryWriter::set_stream(Stream s, int every_n) {
   std::lock_guard lk(mu_);
   stream_ = std::move(s);
   stream_every_ = every_n;
+}
+
+void TelemetryWriter::set_batch_stream(BatchStream s, std::size_t batch_samples) {
+  std::lock_guard lk(mu_);
+  batch_stream_ = std::move(s);
+  batch_samples_ = std::max<std::size_t>(1, batch_samples);
+  batch_.clear();
+  batch_.reserve(batch_samples_ * 4);
+  out_batch_.reserve(batch_samples_ * 4);
 }
 
 RunStats TelemetryWriter::stats(std::uint64_t job) const {

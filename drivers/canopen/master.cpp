@@ -493,14 +493,17 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
       booted_[i] = true;
       if (cycling_) {
         r.faults |= static_cast<std::uint8_t>(NodeFault::kUnexpectedBootUp);
+        r.nmt_lost = true;
         push_event({MasterEvent::Kind::kUnexpectedBootUp, n, 0, 0, counters_.cycles});
       }
     } else if (*st != r.nmt && cycling_) {
+      if (*st != NmtState::kOperational) r.nmt_lost = true;
       push_event({MasterEvent::Kind::kNmtStateChange, n, static_cast<std::uint16_t>(*st), 0,
                   counters_.cycles});
     }
     r.nmt = *st;
     r.last_heartbeat_ns = now_ns_;
+    r.heartbeat_since_loss = true;
     return;
   }
   if (std::uint8_t n = node_of(id, kCobEmcy); n != 0 && index_of(n) >= 0) {
@@ -510,6 +513,7 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
       return;
     }
     ++counters_.emcy_frames;
+    if (e->code != 0) rt_[static_cast<std::size_t>(index_of(n))].emcy_code = e->code;
     push_event({MasterEvent::Kind::kEmcy, n, e->code, e->error_register, counters_.cycles});
     return;
   }
@@ -538,11 +542,13 @@ CycleStatus Master::begin_cycle(std::int64_t now_ns) noexcept {
   sync_mono_ns_ = mono_ns();
   const SendResult s = bus_.send(sync_frame());
   if (s == SendResult::kDropped) ++counters_.tx_dropped;
+  // The producer runs on the wall clock whatever `now_ns` is (see the header: the drives time it
+  // with their own clock).
+  const std::int64_t wall = sync_mono_ns_;
   if (cfg_.master_heartbeat_ms > 0 && heartbeat_on_ &&
       (last_master_hb_ns_ < 0 ||
-       now_ns - last_master_hb_ns_ >=
-           static_cast<std::int64_t>(cfg_.master_heartbeat_ms) * 1000000LL)) {
-    last_master_hb_ns_ = now_ns;
+       wall - last_master_hb_ns_ >= static_cast<std::int64_t>(cfg_.master_heartbeat_ms) * 1000000LL)) {
+    last_master_hb_ns_ = wall;
     if (bus_.send(heartbeat_frame(cfg_.master_node_id, NmtState::kOperational)) ==
         SendResult::kDropped)
       ++counters_.tx_dropped;
@@ -596,6 +602,7 @@ CycleStatus Master::collect() noexcept {
         now_ns_ - r.last_heartbeat_ns > static_cast<std::int64_t>(n.heartbeat_timeout_ms) * 1000000LL &&
         (r.faults & static_cast<std::uint8_t>(NodeFault::kHeartbeatLost)) == 0) {
       r.faults |= static_cast<std::uint8_t>(NodeFault::kHeartbeatLost);
+      r.heartbeat_since_loss = false;
       push_event({MasterEvent::Kind::kHeartbeatLost, n.node_id, 0, 0, counters_.cycles});
     }
     if (r.faults != 0) fault = true;
@@ -653,10 +660,16 @@ void Master::set_request_all(DriveRequest r) noexcept {
 
 void Master::reset_faults() noexcept {
   fault_reset_ = true;
+  constexpr auto kLost = static_cast<std::uint8_t>(NodeFault::kHeartbeatLost);
   for (auto& r : rt_) {
-    r.faults = 0;
+    // A heartbeat loss is acknowledged only when the node has been heard again since: re-arming
+    // the timer here let `reset` succeed with the drive still silent (issue 16), and the machine
+    // faulted again a consumer timeout later.
+    const bool still_lost = (r.faults & kLost) != 0 && !r.heartbeat_since_loss;
+    r.faults = still_lost ? kLost : 0;
     r.missed_streak = 0;
-    r.last_heartbeat_ns = now_ns_;
+    r.emcy_code = 0;
+    r.nmt_lost = r.nmt_lost && r.nmt != NmtState::kOperational;
   }
   bus_.clear_bus_state();
 }

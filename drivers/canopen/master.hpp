@@ -11,8 +11,12 @@
 // (codec.hpp: counts_to_mm, mm_s_to_counts_s).
 //
 // Time: the RT functions take `now_ns` from the caller (CLOCK_MONOTONIC in the daemon, the
-// lockstep cycle time in tests) for heartbeat-consumer timeouts; the TPDO receive deadline is
-// wall-clock (CLOCK_MONOTONIC) because it bounds the cycle.
+// lockstep cycle time in tests) for the master's heartbeat-CONSUMER timeouts; the TPDO receive
+// deadline is wall-clock (CLOCK_MONOTONIC) because it bounds the cycle. The master's own heartbeat
+// (PRODUCER) is always sent on CLOCK_MONOTONIC: the drives consume it with a consumer time in
+// milliseconds of their own clock (0x1016 = 3 x master_heartbeat_ms), so cycles that run slower
+// than real time (lockstep on a loaded host) must not stretch it (issue 16: they used to, and
+// the drives timed out with EMCY 0x8130).
 //
 // Faults are latched per node (drive fault, heartbeat lost, missed-TPDO streak, unexpected
 // boot-up) and reported as MasterEvents through a fixed ring (pop_event, non-RT describe()).
@@ -157,6 +161,13 @@ struct NodeRuntime {
   std::uint64_t missed_total = 0;
   std::uint64_t tpdo_received = 0;
   std::uint8_t faults = 0;  // NodeFault bits, latched
+  // A heartbeat frame arrived after the heartbeat-lost latch was set: only then can reset_faults()
+  // clear it (acknowledging does not bring a silent drive back).
+  bool heartbeat_since_loss = true;
+  // Latched until reset_faults(): the last EMCY error code (0x0000 "error reset" not latched) and a
+  // departure from NMT operational while cycling. nmt_lost clears only when the node is operational.
+  std::uint16_t emcy_code = 0;
+  bool nmt_lost = false;
   DriveRequest request = DriveRequest::kDisabled;
   std::int32_t target = 0;  // CSV/PV: counts/s; CSP: counts
   std::uint16_t controlword = 0;

@@ -212,6 +212,15 @@ TEST(DaemonCanopen, HeartbeatLossOfOneNodeIsAFaultNamingTheNode) {
   }
   EXPECT_NE(log.find("node 3 (Z): heartbeat lost (no heartbeat for 200 ms)"), std::string::npos)
       << log;
+  // Issue 16: the node is still silent, so `reset` is refused naming the node and the missing
+  // heartbeat (acknowledging used to re-arm the heartbeat timer: the reset succeeded and the
+  // machine faulted again one consumer timeout later).
+  const json r = d.call({{"cmd", "reset"}});
+  EXPECT_FALSE(r.value("ok", true)) << r.dump();
+  const std::string err = r.value("error", "");
+  EXPECT_NE(err.find("no heartbeat from node 3"), std::string::npos) << err;
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));  // > heartbeat_timeout_ms
+  EXPECT_EQ(d.state(), "FAULT");
   EXPECT_EQ(d.terminate_and_wait(SIGTERM), 0) << d.log();
 }
 

@@ -89,7 +89,8 @@ TEST(ContourFigures, Eq11CoupledVsUncoupled) {
   {
     FILE* f = std::fopen(cfg.c_str(), "w");
     ASSERT_NE(f, nullptr);
-    std::fputs("control:\n  coupling: {cp: 1.5, ci_per_s: 30, cd_s: 0.03}\n", f);
+    std::fputs("control:\n  coupling: {cp: 1.5, ci_per_s: 30, cd_s: 0.03}\n"
+               "machine:\n  axes: [{name: X}, {name: Y}, {name: Z}]\n", f);
     std::fclose(f);
   }
   const auto weak =

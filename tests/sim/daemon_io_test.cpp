@@ -219,3 +219,53 @@ TEST(DaemonIo, SighupSwapsGainsAndSafetyLimitsWhileRunning) {
 }
 
 }  // namespace
+
+namespace {
+
+bool any_starts(const json& list, const std::string& prefix) {
+  for (const auto& e : list)
+    if (e.get<std::string>().rfind(prefix, 0) == 0) return true;
+  return false;
+}
+
+}  // namespace
+
+// Issue 16: after a reload every changed key is applied at a cycle boundary (and enforced at once)
+// or refused naming it; a soft limit moved inside the axis' position is refused.
+TEST(DaemonIo, SighupAppliesOrRefusesEveryChangedKeyAndEnforcesNewSoftLimitsAtOnce) {
+  Daemon d("hup2", "");
+  std::string yaml = slurp(d.config_path());
+  const std::string orig = yaml;
+  // X: max_mm 200 -> 50 (the first axis' line), a restart-only key, a live safety key.
+  yaml.replace(yaml.find("max_mm: 200"), std::string("max_mm: 200").size(), "max_mm: 50");
+  yaml = replace_all(yaml, "fir_ms: 100", "fir_ms: 80");
+  std::ofstream(d.config_path()) << yaml;
+  d.signal(SIGHUP);
+  json st = d.wait_for([](const json& s) { return s["config"]["reloads"].get<int>() >= 1; });
+  const json& last = st["config"]["last_reload"];
+  EXPECT_TRUE(any_starts(last["applied"], "machine.axes[0].max_mm: 200 -> 50")) << last.dump();
+  EXPECT_TRUE(any_starts(last["refused"], "interpolator.fir_ms: 100 -> 80: needs restart")) << last.dump();
+  EXPECT_EQ(st["config"]["pending_restart"], json({"interpolator.fir_ms"}));
+  st = d.wait_for([](const json& s) { return s["soft_limits_mm"]["max"][0].get<double>() == 50.0; });
+  // The old code logged "staged" and then let a jog go to X 103.
+  const json j = d.call({{"cmd", "jog"}, {"axis", "X"}, {"velocity_mm_min", 3000}, {"distance_mm", 103}});
+  EXPECT_FALSE(j["ok"].get<bool>()) << j.dump();
+  EXPECT_NE(j.value("error", "").find("outside the soft limits of X [-200.000000, 50.000000]"),
+            std::string::npos) << j.dump();
+  // Jog to X 40, then a limit at 30 would put X outside it: refused while X stands there.
+  d.ok({{"cmd", "jog"}, {"axis", "X"}, {"velocity_mm_min", 3000}, {"distance_mm", 40}});
+  d.wait_for([](const json& s) { return !s["jogging"].get<bool>() && s["act_mm"][0].get<double>() > 39.9; });
+  yaml = replace_all(yaml, "max_mm: 50", "max_mm: 30");
+  std::ofstream(d.config_path()) << yaml;
+  d.signal(SIGHUP);
+  st = d.wait_for([](const json& s) { return s["config"]["reloads"].get<int>() >= 2; });
+  EXPECT_TRUE(any_starts(st["config"]["last_reload"]["refused"], "machine.axes[0].max_mm: 50 -> 30: refused: axis X is at"))
+      << st["config"].dump();
+  EXPECT_EQ(st["soft_limits_mm"]["max"][0].get<double>(), 50.0);
+  // Back to the original file: fir_ms is no longer pending.
+  std::ofstream(d.config_path()) << orig;
+  d.signal(SIGHUP);
+  st = d.wait_for([](const json& s) { return s["config"]["reloads"].get<int>() >= 3; });
+  EXPECT_TRUE(st["config"]["pending_restart"].empty()) << st["config"].dump();
+  EXPECT_EQ(st["soft_limits_mm"]["max"][0].get<double>(), 200.0);
+}

@@ -7,6 +7,10 @@
 
 namespace contour::test {
 
+// A machine section for tests of other sections (a configuration without `machine:` is an error,
+// issue 16). Appended at the end so that the line numbers of the text before it stay as written.
+inline constexpr const char* kMachineYaml = "\nmachine:\n  axes: [{name: X}, {name: Y}, {name: Z}]\n";
+
 // Runs f (a loader call) and returns the ConfigError's messages; empty when it loaded fine.
 template <class F>
 std::vector<std::string> config_errors_of(F&& f) {

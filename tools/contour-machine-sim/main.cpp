@@ -90,6 +90,11 @@ int main(int argc, char** argv) {
   app.add_option("--tpdo-sampling", tpdo_sampling,
                  "NODE:sync|after_step when the node samples its TPDO: at SYNC before its step, "
                  "or after it (default: tpdo_sampling of the node's drive profile)");
+  std::string hb_consumer = "sync";
+  app.add_option("--hb-consumer", hb_consumer,
+                 "sync|wall how every node times the master's heartbeat (0x1016): in SYNCs "
+                 "(lockstep, default) or on its own wall clock like a real drive")
+      ->check(CLI::IsMember({"sync", "wall"}));
   std::uint64_t storm_seed = 0;
   long storm_interval = 5000;
   std::string storm_kinds;
@@ -206,6 +211,7 @@ int main(int argc, char** argv) {
     if (n.identity.product_code) s.product_code = *n.identity.product_code;
     if (n.identity.revision) s.revision = *n.identity.revision;
     s.quirks.tpdo_after_step = n.profile.tpdo_sampling == "after_step";
+    s.quirks.wall_clock_consumer = hb_consumer == "wall";
     for (const auto& ax : cfg.machine.axes) {
       if (ax.node_id != n.node_id) continue;
       s.counts_per_mm = ax.counts_per_mm;

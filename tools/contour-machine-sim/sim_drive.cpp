@@ -200,7 +200,10 @@ void SimDrive::master_heartbeat_lost() {
 
 void SimDrive::tick_wall(std::int64_t now_ns) {
   now_wall_ns_ = now_ns;
-  if (master_hb_armed_) {
+  if (master_hb_armed_ && s_.quirks.wall_clock_consumer) {
+    const std::int64_t t_ns = static_cast<std::int64_t>(u32(0x1016, 1) & 0xFFFF) * 1000000LL;
+    if (now_ns - master_hb_wall_ns_ > t_ns) master_heartbeat_lost();
+  } else if (master_hb_armed_) {
     // SYNC stopped too (the master process is gone or frozen): the consumer falls back to the
     // wall clock, but only after max(5 x consumer time, 2 s) of silence. While SYNC flows the
     // consumer is lockstep (on_sync); a master merely descheduled for a few hundred ms on a
@@ -296,7 +299,7 @@ void SimDrive::raise_fault(std::uint16_t code) {
 void SimDrive::on_sync() {
   ++syncs_;
   last_sync_wall_ns_ = now_wall_ns_;
-  if (master_hb_armed_) {
+  if (master_hb_armed_ && !s_.quirks.wall_clock_consumer) {
     const long t_ms = static_cast<long>(u32(0x1016, 1) & 0xFFFF);
     const long limit =
         std::max<long>(1, std::lround(static_cast<double>(t_ms) * 1e-3 / s_.period_s));

@@ -62,6 +62,9 @@ struct SimQuirks {
   int pdo_max_entries = 8;      // mapping entries per PDO (1..8)
   bool expedited_only = false;  // SDO server: segmented transfers are aborted (0x05040001)
   bool tpdo_after_step = false;  // TPDO sampled after the step (see the header comment)
+  // Master-heartbeat consumer (0x1016) timed on the drive's own wall clock, as a real drive does,
+  // instead of in SYNCs (lockstep, the default: results independent of scheduling).
+  bool wall_clock_consumer = false;
 };
 
 struct SimDriveSetup {

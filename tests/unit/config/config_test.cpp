@@ -47,3 +47,14 @@ TEST(Config, DuplicateAxisRejected) {
   auto errs = errors_of("machine:\n  axes:\n    - name: X\n    - name: X\n");
   EXPECT_TRUE(any_contains(errs, "axis X is defined twice"));
 }
+
+// Issue 16: a configuration without `machine:` is an error (it used to run the paper's Table 1
+// machine without a word).
+TEST(Config, AFileWithoutAMachineSectionIsAnError) {
+  const auto errs = contour::test::config_errors("safety:\n  ferror_mm: 1.0\n", "m.yaml");
+  ASSERT_EQ(errs.size(), 1u) << ::testing::PrintToString(errs);
+  EXPECT_NE(errs[0].find("m.yaml:1:1: machine: missing section"), std::string::npos) << errs[0];
+  EXPECT_TRUE(contour::test::config_errors("safety:\n  ferror_mm: 1.0\n" +
+                                           std::string(contour::test::kMachineYaml))
+                  .empty());
+}

@@ -15,7 +15,7 @@ using contour::test::any_contains;
 }  // namespace
 
 TEST(ControlConfig, DefaultsAreThePapersTable1) {
-  const Config c = load_config_string("control: {}\n");
+  const Config c = load_config_string(std::string("control: {}\n") + contour::test::kMachineYaml);
   EXPECT_EQ(c.control.controller, ControllerType::kCcc);
   EXPECT_DOUBLE_EQ(c.control.kp[2], 0.6);
   EXPECT_DOUBLE_EQ(c.control.coupling.cp, 15.0);
@@ -33,7 +33,7 @@ TEST(ControlConfig, ParsesEveryKey) {
       "ki_per_s: [4, 5, 6]}\n  feed_forward: 0.5\n  velocity_limit_mm_min: [6000, 6000, 3000]\n"
       "  coupling: {cp: 10, ci_per_s: 100, cd_s: 0.1, remove_tangential_integral: false}\n"
       "  model: linear\n  window_rule: literal\n  window_capacity: 64\n"
-      "  delay_compensation: false\n");
+      "  delay_compensation: false\n" + std::string(contour::test::kMachineYaml));
   EXPECT_EQ(c.control.controller, ControllerType::kPid);
   EXPECT_DOUBLE_EQ(c.control.kp[1], 0.5);
   EXPECT_DOUBLE_EQ(c.control.pid_ki_per_s[1], 5.0);

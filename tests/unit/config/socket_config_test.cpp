@@ -9,7 +9,7 @@ using contour::config::load_config_string;
 using contour::test::any_contains;
 
 TEST(SocketConfig, LimitDefaults) {
-  const auto cfg = load_config_string("socket:\n  path: /tmp/x.sock\n");
+  const auto cfg = load_config_string(std::string("socket:\n  path: /tmp/x.sock\n") + contour::test::kMachineYaml);
   EXPECT_DOUBLE_EQ(cfg.socket.idle_timeout_s, 60.0);
   EXPECT_EQ(cfg.socket.max_requests_per_s, 500);
   EXPECT_EQ(cfg.socket.max_buffered_bytes, 4 << 20);
@@ -19,7 +19,7 @@ TEST(SocketConfig, LimitDefaults) {
 TEST(SocketConfig, LimitsAreRead) {
   const auto cfg = load_config_string(
       "socket:\n  idle_timeout_s: 2.5\n  max_requests_per_s: 40\n  max_buffered_bytes: 131072\n"
-      "  max_clients: 3\n");
+      "  max_clients: 3\n" + std::string(contour::test::kMachineYaml));
   EXPECT_DOUBLE_EQ(cfg.socket.idle_timeout_s, 2.5);
   EXPECT_EQ(cfg.socket.max_requests_per_s, 40);
   EXPECT_EQ(cfg.socket.max_buffered_bytes, 131072);
@@ -29,7 +29,7 @@ TEST(SocketConfig, LimitsAreRead) {
 TEST(SocketConfig, OutOfRangeAndUnknownKeysAreErrorsWithLineAndKey) {
   const auto errs = contour::test::config_errors(
       "socket:\n  idle_timeout_s: 0\n  max_requests_per_s: 0\n  max_buffered_bytes: 100\n"
-      "  idle_timeout: 5\n",
+      "  idle_timeout: 5\n" + std::string(contour::test::kMachineYaml),
       "s.yaml");
   ASSERT_EQ(errs.size(), 4u) << ::testing::PrintToString(errs);
   EXPECT_TRUE(any_contains(errs, "s.yaml:2:")) << errs[0];

@@ -2,7 +2,9 @@
 // missed TPDOs are counted and fault after the configured streak, the bus-load ceiling refuses.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <deque>
+#include <thread>
 
 #include "drivers/canopen/master.hpp"
 #include "tests/support/alloc_counter.hpp"
@@ -28,8 +30,10 @@ class FakeBus final : public contour::drivers::CanBus {
     ring[head] = f;
     head = (head + 1) % ring.size();
   }
+  int master_hb = 0;  // heartbeats of the master (node 127 by default: 0x77F)
   SendResult send(const CanFrame& f) noexcept override {
     ++sent;
+    if (f.id >= 0x701 && f.id <= 0x77F && f.dlc == 1) ++master_hb;
     if (f.id == 0x080) {
       pos += 7;
       for (int n = 1; n <= nodes; ++n) {
@@ -130,4 +134,111 @@ TEST(CanopenMaster, BusLoadAboveTheCeilingIsRefused) {
   }
   cfg.nodes[3].sync_every = 10;  // the spindle at a tenth of the rate: 76.8 %
   EXPECT_NO_THROW(co::Master(bus, cfg));
+}
+
+// Issue 16: the master's heartbeat is produced on the wall clock, whatever time the caller's
+// cycles claim (lockstep cycles that run slower than real time stretched it past the drives'
+// consumer time, 0x1016 = 3 x master_heartbeat_ms, and the drives faulted with EMCY 0x8130).
+namespace {
+int master_heartbeats(const FakeBus& bus) { return bus.master_hb; }
+}  // namespace
+
+TEST(CanopenMaster, HeartbeatIsProducedOnTheWallClockNotOnCycleTime) {
+  FakeBus bus;
+  auto cfg = three_axes();
+  cfg.master_heartbeat_ms = 100;
+  co::Master m(bus, cfg);
+  // 100 cycles that claim 1 ms each but take >= 5 ms of real time (>= 500 ms): a cycle-time
+  // producer sends exactly one heartbeat (at cycle 0), the wall-clock one at least one per 100 ms
+  // of the >= 500 ms that really pass (bounded below by 2 even if the host stalls a cycle).
+  for (int k = 0; k < 100; ++k) {
+    m.begin_cycle(k * 1000000LL);
+    m.collect();
+    m.send_rpdos();
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  EXPECT_GE(master_heartbeats(bus), 2);
+  // Cycles that claim 1 ms each but run back to back (far less than 100 ms of real time for 150
+  // cycles on any host): no more heartbeats than the wall clock calls for.
+  FakeBus fast;
+  co::Master m2(fast, cfg);
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int k = 0; k < 150; ++k) {
+    m2.begin_cycle(k * 1000000LL);
+    m2.collect();
+    m2.send_rpdos();
+  }
+  const double wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LE(master_heartbeats(fast), 1 + static_cast<int>(wall_ms / 100.0)) << wall_ms << " ms";
+}
+
+TEST(CanopenMaster, AHeartbeatLossIsAcknowledgedOnlyAfterTheNodeIsHeardAgain) {
+  FakeBus bus;
+  auto cfg = three_axes();
+  for (auto& n : cfg.nodes) {
+    n.heartbeat_ms = 50;
+    n.heartbeat_timeout_ms = 200;
+  }
+  co::Master m(bus, cfg);
+  std::int64_t t = 0;
+  auto cycle = [&] {
+    m.begin_cycle(t);
+    m.collect();
+    m.send_rpdos();
+    t += 1000000;
+  };
+  auto beat = [&](std::uint8_t n) { bus.push(co::heartbeat_frame(n, co::NmtState::kOperational)); };
+  constexpr auto kLost = static_cast<std::uint8_t>(co::NodeFault::kHeartbeatLost);
+  for (int k = 0; k < 300; ++k) {
+    if (k % 50 == 0) {
+      beat(1);
+      beat(3);  // node 2 stays silent
+    }
+    cycle();
+  }
+  ASSERT_NE(m.node(1).faults & kLost, 0);
+  EXPECT_EQ(m.node(0).faults & kLost, 0);
+  // The operator's reset while node 2 is still silent: the latch stays (it used to be cleared and
+  // the timer re-armed, so `reset` succeeded and the machine faulted again 200 ms later).
+  m.reset_faults();
+  cycle();
+  EXPECT_NE(m.node(1).faults & kLost, 0) << "acknowledged without a heartbeat";
+  beat(2);  // node 2 is back
+  cycle();
+  EXPECT_NE(m.node(1).faults & kLost, 0) << "a latch clears on the operator's reset, not by itself";
+  m.reset_faults();
+  cycle();
+  EXPECT_EQ(m.node(1).faults & kLost, 0);
+}
+
+TEST(CanopenMaster, EmcyAndNmtChangesAreLatchedPerNodeUntilAcknowledged) {
+  FakeBus bus;
+  co::Master m(bus, three_axes());
+  std::int64_t t = 0;
+  auto cycle = [&] {
+    m.begin_cycle(t);
+    m.collect();
+    m.send_rpdos();
+    t += 1000000;
+  };
+  cycle();
+  bus.push(co::emcy_frame(2, co::Emcy{0x8130, 0x11, {}}));
+  bus.push(co::heartbeat_frame(3, co::NmtState::kOperational));
+  cycle();
+  EXPECT_EQ(m.node(1).emcy_code, 0x8130);
+  EXPECT_FALSE(m.node(2).nmt_lost);
+  bus.push(co::heartbeat_frame(3, co::NmtState::kBootUp));  // node 3 rebooted behind our back
+  cycle();
+  EXPECT_TRUE(m.node(2).nmt_lost);
+  bus.push(co::emcy_frame(2, co::Emcy{0x0000, 0x00, {}}));  // "error reset": not latched over a code
+  cycle();
+  EXPECT_EQ(m.node(1).emcy_code, 0x8130);
+  m.reset_faults();
+  cycle();
+  EXPECT_EQ(m.node(1).emcy_code, 0);
+  EXPECT_TRUE(m.node(2).nmt_lost) << "node 3 is pre-operational after its boot-up";
+  bus.push(co::heartbeat_frame(3, co::NmtState::kOperational));
+  cycle();
+  m.reset_faults();
+  EXPECT_FALSE(m.node(2).nmt_lost);
 }
