@@ -10,9 +10,11 @@
 #include "config/config.hpp"
 #include "config/control_config.hpp"
 #include "control/loop_stability.hpp"
+#include "tests/support/config_errors.hpp"
 
 namespace contour::config {
 namespace {
+using contour::test::kMachineYaml;
 
 control::StabilityVerdict check(const Config& cfg, ControllerType type) {
   std::array<control::FeedDriveParams, 3> dp{};
@@ -70,19 +72,23 @@ TEST(LoopStabilityConfigs, PlantFromTheMachineSection) {
 }
 
 TEST(LoopStabilityConfigs, DerivativeKeysParsedAndValidated) {
-  Config c = load_config_string("control: {}\n");
+  Config c = load_config_string(std::string("control: {}\n") + kMachineYaml);
   EXPECT_DOUBLE_EQ(c.control.derivative.model_blend_s, 0.005);  // documented default
   EXPECT_EQ(c.control.derivative.same_geometry, control::SameGeometry::kAhead);
   EXPECT_DOUBLE_EQ(c.control.derivative.lowpass_s, 0.0);
   c = load_config_string(
-      "control:\n  derivative: {model_blend_ms: 0, same_geometry: never, lowpass_ms: 1.5}\n");
+      std::string("control:\n  derivative: {model_blend_ms: 0, same_geometry: never, lowpass_ms: 1.5}\n") +
+      kMachineYaml);
   EXPECT_DOUBLE_EQ(c.control.derivative.model_blend_s, 0.0);
   EXPECT_EQ(c.control.derivative.same_geometry, control::SameGeometry::kNever);
   EXPECT_DOUBLE_EQ(c.control.derivative.lowpass_s, 0.0015);
-  EXPECT_THROW(load_config_string("control:\n  derivative: {model_blend_ms: -1}\n"), ConfigError);
-  EXPECT_THROW(load_config_string("control:\n  derivative: {same_geometry: sometimes}\n"),
+  EXPECT_THROW(load_config_string(std::string("control:\n  derivative: {model_blend_ms: -1}\n") + kMachineYaml),
                ConfigError);
-  EXPECT_THROW(load_config_string("control:\n  derivative: {blend_ms: 5}\n"), ConfigError);
+  EXPECT_THROW(load_config_string(std::string("control:\n  derivative: {same_geometry: sometimes}\n") +
+                                  kMachineYaml),
+               ConfigError);
+  EXPECT_THROW(load_config_string(std::string("control:\n  derivative: {blend_ms: 5}\n") + kMachineYaml),
+               ConfigError);
 }
 
 }  // namespace
