@@ -1,5 +1,6 @@
 #include "config/control_config.hpp"
 
+#include <algorithm>
 #include <limits>
 #include <stdexcept>
 
@@ -81,6 +82,16 @@ ControlConfig parse_control(Section& s) {
                       : control::WindowRule::kMultiStep;
   c.window_capacity = static_cast<int>(s.integer("window_capacity", 256, 4, 1 << 20));
   c.delay_compensation = s.boolean("delay_compensation", true);
+  {
+    Section d = s.child("derivative");
+    c.derivative.model_blend_s = d.number("model_blend_ms", 5.0, 0.0, 1000.0) / 1000.0;
+    const std::string sg = d.choice("same_geometry", "ahead", {"never", "ahead", "always"});
+    c.derivative.same_geometry = sg == "never"    ? control::SameGeometry::kNever
+                                 : sg == "always" ? control::SameGeometry::kAlways
+                                                  : control::SameGeometry::kAhead;
+    c.derivative.lowpass_s = d.number("lowpass_ms", 0.0, 0.0, 1000.0) / 1000.0;
+    d.finish();
+  }
   return c;
 }
 
@@ -93,6 +104,7 @@ control::ServoParams make_servo_params(const ControlConfig& cfg, ControllerType 
   p.drive = drives;
   p.delay_cycles = delay_cycles;
   p.delay_compensation = cfg.delay_compensation;
+  p.derivative = cfg.derivative;
   p.law = type == ControllerType::kPid ? control::AxisLaw::kPid : control::AxisLaw::kP;
   p.coupling = cfg.coupling;
   p.coupling.enable = type == ControllerType::kCcc;
@@ -119,6 +131,23 @@ control::ContourErrorParams make_model_params(const ControlConfig& cfg) {
   m.rule = cfg.window_rule;
   m.window_capacity = cfg.window_capacity;
   return m;
+}
+
+control::LoopPlant make_loop_plant(const MachineConfig& m) {
+  control::LoopPlant pl;
+  pl.axes = static_cast<int>(std::min<std::size_t>(m.axes.size(), control::kMaxServoAxes));
+  for (int i = 0; i < pl.axes; ++i) {
+    const AxisConfig& a = m.axes[static_cast<std::size_t>(i)];
+    control::AxisPlant& p = pl.axis[static_cast<std::size_t>(i)];
+    p.gain_per_s = a.drive.gain_per_s;
+    p.tau_s = a.drive.tau_s;
+    p.delay_cycles = a.drive.delay_cycles;
+    p.blu_mm = a.drive.blu_mm > 0.0 ? a.drive.blu_mm : 1.0 / a.counts_per_mm;
+    p.max_velocity_mm_s = a.max_velocity_mm_min / 60.0;
+    p.max_accel_mm_s2 = a.max_accel_mm_s2;
+    p.clamp_tau_s = a.drive.tau_s;
+  }
+  return pl;
 }
 
 }  // namespace contour::config

@@ -19,11 +19,17 @@
 //     window_rule: multi_step    # multi_step | literal (eq 8 taken literally: demo only)
 //     window_capacity: 256       # stored reference points (>= max lag in points + 3)
 //     delay_compensation: true   # Smith predictor for the bus transport delay
+//     derivative:                # filtering of the derivative terms (kd_s, cd_s): CHATTER.md
+//       model_blend_ms: 5        # D acts on model + F(encoder - model), F 2nd order; 0 = off
+//       same_geometry: ahead     # never | ahead | always: coupling D on one circle/line
+//       lowpass_ms: 0            # first-order low-pass on the D terms' outputs; 0 = off
 #include <array>
 #include <string>
 
+#include "config/machine_config.hpp"
 #include "config/yaml_reader.hpp"
 #include "control/contour_error.hpp"
+#include "control/loop_stability.hpp"
 #include "control/servo_controller.hpp"
 
 namespace contour::config {
@@ -43,6 +49,8 @@ struct ControlConfig {
   control::WindowRule window_rule = control::WindowRule::kMultiStep;
   int window_capacity = 256;
   bool delay_compensation = true;
+  // Documented defaults (control/CHATTER.md): model blend 5 ms, same geometry while ahead.
+  control::DerivativeFilter derivative{0.005, control::SameGeometry::kAhead, 0.0};
 };
 
 ControllerType parse_controller_type(const std::string& name);  // throws std::invalid_argument
@@ -56,5 +64,11 @@ control::ServoParams make_servo_params(const ControlConfig& cfg, ControllerType 
                                        const std::array<control::FeedDriveParams, 3>& drives,
                                        int axes, double period_s, int delay_cycles);
 control::ContourErrorParams make_model_params(const ControlConfig& cfg);
+
+// The loop the stability check simulates (control/loop_stability.hpp), from the machine section:
+// each axis' drive model (sim: gain, tau, delay_cycles, blu) as the real plant, its velocity and
+// acceleration limits, and the configured tau as the daemon's acceleration-clamp time constant.
+// A measured plant (`contourctl identify`) replaces gain_per_s / tau_s / delay_cycles afterwards.
+control::LoopPlant make_loop_plant(const MachineConfig& m);
 
 }  // namespace contour::config

@@ -30,6 +30,22 @@ SafetyConfig parse_safety(Section& s) {
   c.standstill_timeout_s = s.number("standstill_timeout_s", 2.0, 0.01, 60.0);
   if (c.standstill_timeout_s <= c.standstill_time_s)
     s.error("standstill_timeout_s", "must be longer than standstill_time_s");
+  if (s.has("chatter")) {
+    Section ch = s.child("chatter");
+    auto& w = c.chatter;
+    w.enable = ch.boolean("enable", true);
+    w.window_s = ch.number("window_ms", 100.0, 10.0, 10000.0) / 1e3;
+    w.warn_mm_s = ch.number("warn_mm_s", 5.0, 1e-3, 1e5);
+    w.warn_clamps_per_s = ch.number("warn_clamps_per_s", 50.0, 1e-3, 1e6);
+    w.warn_s = ch.number("warn_ms", 250.0, 0.0, 60000.0) / 1e3;
+    w.fault_mm_s = ch.number("fault_mm_s", 40.0, 1e-3, 1e5);
+    w.fault_clamps_per_s = ch.number("fault_clamps_per_s", 300.0, 1e-3, 1e6);
+    w.fault_s = ch.number("fault_ms", 500.0, 0.0, 60000.0) / 1e3;
+    if (w.fault_mm_s < w.warn_mm_s) ch.error("fault_mm_s", "must not be below warn_mm_s");
+    if (w.fault_clamps_per_s < w.warn_clamps_per_s) {
+      ch.error("fault_clamps_per_s", "must not be below warn_clamps_per_s");
+    }
+  }
   return c;
 }
 

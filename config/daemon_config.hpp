@@ -33,6 +33,20 @@ struct SafetyConfig {
   double standstill_velocity_mm_s = 1.0;
   double standstill_time_s = 0.05;
   double standstill_timeout_s = 2.0;
+  // Run-time limit-cycle / chatter watchdog (issue 16; control::ChatterMonitor, control/CHATTER.md):
+  // per axis over a sliding window, the RMS cycle-to-cycle change of the velocity command and the
+  // rate of clamped cycles. Above a warning level for warn_s: a warning event; above a fault level
+  // for fault_s: FAULT "limit cycle" naming the axis and the figure. YAML: safety.chatter.
+  struct Chatter {
+    bool enable = true;
+    double window_s = 0.1;             // window_ms
+    double warn_mm_s = 5.0;            // RMS |dv| per cycle, mm/s
+    double warn_clamps_per_s = 50.0;
+    double warn_s = 0.25;              // warn_ms
+    double fault_mm_s = 40.0;
+    double fault_clamps_per_s = 300.0;
+    double fault_s = 0.5;              // fault_ms
+  } chatter;
 };
 
 struct TelemetryConfig {

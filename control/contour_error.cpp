@@ -51,6 +51,8 @@ ThreePointFoot three_point_foot(const Vec3& a, const Vec3& b, const Vec3& c,
   const double dist = hc.norm();
   ThreePointFoot f;
   f.radius_mm = rho;
+  f.centre = centre;
+  f.plane_normal = nhat;
   f.branch = ContourBranch::kCircle;
   Vec3 radial;
   if (dist < 1e-12 * (1.0 + rho)) {
@@ -66,6 +68,23 @@ ThreePointFoot three_point_foot(const Vec3& a, const Vec3& b, const Vec3& c,
   if (t.dot(c - a) < 0.0) t = -t;
   f.tangent = t;
   return f;
+}
+
+Vec3 eps_on(const ContourErrorResult& g, const Vec3& q) noexcept {
+  switch (g.branch) {
+    case ContourBranch::kCircle: {
+      const Vec3 h = q - g.plane_normal * (q - g.centre).dot(g.plane_normal);
+      const Vec3 hc = h - g.centre;
+      const double dist = hc.norm();
+      if (!(dist > 1e-12 * (1.0 + g.radius_mm))) return g.k_point - q;
+      return g.centre + g.radius_mm * hc / dist - q;
+    }
+    case ContourBranch::kLine:
+      return g.k_point + g.tangent * (q - g.k_point).dot(g.tangent) - q;
+    case ContourBranch::kPoint:
+      break;
+  }
+  return g.k_point - q;
 }
 
 void ContourErrorModel::configure(const ContourErrorParams& p) {
@@ -167,6 +186,8 @@ ContourErrorResult ContourErrorModel::circle_model(const Vec3& p) noexcept {
   r.k_point = f.k;
   r.tangent = f.tangent;
   r.radius_mm = f.radius_mm;
+  r.centre = f.centre;
+  r.plane_normal = f.plane_normal;
   r.branch = f.branch;
   r.eps = f.k - p;
   r.lag_points = static_cast<int>(newest_ - centre_);

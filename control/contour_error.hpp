@@ -74,10 +74,19 @@ struct ContourErrorResult {
   Vec3 k_point = Vec3::Zero();  // K, mm
   Vec3 tangent = Vec3::Zero();  // unit path tangent at K (zero when unknown)
   double radius_mm = 0.0;       // circle radius (0 for line/point branches)
+  Vec3 centre = Vec3::Zero();   // circle branch: centre C and unit plane normal (eqs 1-2)
+  Vec3 plane_normal = Vec3::Zero();
   int lag_points = 0;           // d: newest index - window centre
   ContourBranch branch = ContourBranch::kPoint;
   ContourStatus status = ContourStatus::kNoReference;
 };
+
+// The contour-error vector of another point q on the SAME local path geometry as `g` (its
+// circle, line or point; eqs 3-7 without a window update). Used by the coupling derivative to
+// difference two positions on one geometry, so that a window advance or a branch change (a new
+// circle) is not differentiated as if the tool had moved. eps_on(g, P) == g.eps for the P that
+// produced g. Pure, noexcept, never NaN for finite q (a point on the circle's axis gives K = K(g)).
+Vec3 eps_on(const ContourErrorResult& g, const Vec3& q) noexcept;
 
 class ContourErrorModel {
  public:
@@ -122,6 +131,8 @@ struct ThreePointFoot {
   Vec3 k = Vec3::Zero();
   Vec3 tangent = Vec3::Zero();  // unit, oriented a -> c
   double radius_mm = 0.0;
+  Vec3 centre = Vec3::Zero();        // circle branch only
+  Vec3 plane_normal = Vec3::Zero();  // circle branch only (unit)
   ContourBranch branch = ContourBranch::kPoint;
 };
 ThreePointFoot three_point_foot(const Vec3& a, const Vec3& b, const Vec3& c,

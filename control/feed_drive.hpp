@@ -57,6 +57,20 @@ class FeedDrive {
     return x_mm_;
   }
 
+  // Replace the command of the last step() by u_last + du_mm (the state becomes what step() with
+  // the corrected command would have given). Used by the controller's drive models when the
+  // command the drives really got differs from the one computed (the daemon's clamps).
+  // RT: noexcept, O(1).
+  void correct_last_command(double du_mm) noexcept {
+    if (p_.delay_cycles > 0) {
+      const int last = (head_ + p_.delay_cycles - 1) % p_.delay_cycles;
+      delay_[static_cast<std::size_t>(last)] += du_mm;
+      return;
+    }
+    x_mm_ += d_x_ * du_mm;
+    v_mm_s_ += b_v_ * du_mm;
+  }
+
   // Drives the velocity-mode form: the command is a velocity target v_cmd = K*u (mm/s).
   double step_velocity(double v_cmd_mm_s) noexcept {
     return step(p_.gain_per_s > 0.0 ? v_cmd_mm_s / p_.gain_per_s : 0.0);

@@ -60,6 +60,40 @@ struct CouplingGains {
   bool remove_tangential_integral = true;
 };
 
+// Filtering of the derivative terms (axis PID kd_s and coupling cd_s), issue 16. Why: on a
+// 0.5 um encoder the derivative (e(k) - e(k-1)) / T turns every count into a command step of
+// Cd K BLU / T = 18 mm/s (Table 1); through the daemon on Table 2 the cycle-to-cycle change of the
+// velocity command was 14.2 / 13.1 / 20.0 mm/s RMS (X/Y/Z) with the coupling, 0.8 / 0.6 / 0.06
+// with P only. A plain low-pass on the derivative cannot fix that here: the Table 1 coupled loop
+// crosses over at ~1200 rad/s on the derivative's lead (Cd K / tau), and a 1 ms low-pass already
+// costs 17 % of the seed-000 Table 2 figure (control/CHATTER.md has the table).
+//   model_blend_s: the derivative terms act on the model-aided position
+//       P_tilde = m(k) + F(z) (P_hat(k) - m(k)),  F(z) = ((1 - a) / (1 - a z^-1))^2,
+//       a = exp(-T / model_blend_s),
+//     m the undelayed drive model driven by the issued commands (the Smith predictor's model,
+//     run at every delay). A complementary filter: at high frequency the derivative sees the
+//     model's motion (no encoder counts, no phase lag), at low frequency the encoder. With an
+//     exact model P_hat - m is the quantisation noise alone and the loop's dynamics are those of
+//     the unquantised loop; with a model error the residual reaches the derivative through F (a
+//     steady gain error gives a constant offset, which a derivative ignores). The P and I terms
+//     keep the raw P_hat. 0 = off (the paper's law). This is a "filtered Smith predictor"
+//     (Normey-Rico & Camacho) applied to the derivative path only.
+//   same_geometry: the coupling derivative differences the previous and the current position on
+//     THIS cycle's circle/line (eps_on), instead of eps(k) - eps(k-1) across two windows.
+//     kAhead (default): only while the model extrapolates (window on the newest points, the tool
+//     at or ahead of the reference: a decelerating reference at a blended corner); a new circle
+//     there is a guess about the path ahead, not tool motion. kAlways costs 11 % of the seed-000
+//     Table 2 figure (sharp G01 corners, where the window change is the real corner).
+//   lowpass_s: first-order low-pass on the derivative terms' outputs (the textbook filtered D,
+//     Kd s / (T_f s + 1)); 0 = off. Kept for drives whose model is poor; see CHATTER.md.
+enum class SameGeometry { kNever, kAhead, kAlways };
+
+struct DerivativeFilter {
+  double model_blend_s = 0.0;
+  SameGeometry same_geometry = SameGeometry::kNever;
+  double lowpass_s = 0.0;
+};
+
 struct ServoParams {
   int axes = 3;
   AxisLaw law = AxisLaw::kP;
@@ -72,9 +106,17 @@ struct ServoParams {
   double period_s = 0.001;
   int delay_cycles = 0;
   bool delay_compensation = true;
+  DerivativeFilter derivative{};
 };
 
 enum class ServoStatus : std::uint8_t { kOk = 0, kSaturated };
+
+// The parts of the last command, before the limit (mm of command; times K = mm/s), for telemetry
+// and tuning: u = axis_p + axis_i + axis_d + ff + coupling_p + coupling_i + coupling_d.
+struct ServoTerms {
+  Vec3 axis_p = Vec3::Zero(), axis_i = Vec3::Zero(), axis_d = Vec3::Zero(), ff = Vec3::Zero();
+  Vec3 coupling_p = Vec3::Zero(), coupling_i = Vec3::Zero(), coupling_d = Vec3::Zero();
+};
 
 class ServoController {
  public:
@@ -112,7 +154,15 @@ class ServoController {
   ServoStatus update(const Vec3& r_mm, const Vec3& p_hat_mm, const ContourErrorResult& ce,
                      const Vec3& v_ref_mm_s, Vec3& u_out) noexcept;
 
+  // The command the drives really got this cycle (mm, same convention as update()'s output), when
+  // the caller limited it after update() (the daemon's velocity and acceleration clamps): the
+  // drive models (Smith predictor, derivative model blend) then follow the real drives instead of
+  // drifting away from them. Call after update(), before the next predict(); a call without a
+  // preceding update() (or a second one) is ignored. RT: noexcept, O(axes).
+  void command_applied(const Vec3& u_applied_mm) noexcept;
+
   [[nodiscard]] const ServoParams& params() const noexcept { return p_; }
+  [[nodiscard]] const ServoTerms& last_terms() const noexcept { return terms_; }
   [[nodiscard]] const Vec3& coupling_integral() const noexcept { return ic_; }
 
  private:
@@ -121,6 +171,16 @@ class ServoController {
   Vec3 e_prev_ = Vec3::Zero();
   Vec3 ic_ = Vec3::Zero();      // coupling integrators
   Vec3 eps_prev_ = Vec3::Zero();
+  Vec3 resid_f1_ = Vec3::Zero();
+  Vec3 resid_f_ = Vec3::Zero();
+  Vec3 p_tilde_prev_ = Vec3::Zero();
+  Vec3 u_last_ = Vec3::Zero();   // the command the models were stepped with
+  bool applied_pending_ = false; // update() ran; command_applied() may still correct it
+  ServoTerms terms_{};           // the last update()'s terms (P, I, D, coupling)
+  Vec3 d_axis_ = Vec3::Zero();   // low-passed derivative terms (mm of command)
+  Vec3 d_coup_ = Vec3::Zero();
+  double a_blend_ = 0.0;         // exp(-T / model_blend_s), 0 when off
+  double a_lowpass_ = 0.0;       // exp(-T / lowpass_s), 0 when off
   bool first_ = true;
   std::array<FeedDrive, kMaxServoAxes> model_nd_{};  // undelayed model
   std::array<FeedDrive, kMaxServoAxes> model_d_{};   // same model with the bus delay

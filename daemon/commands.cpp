@@ -13,6 +13,7 @@
 #include "daemon/command_table.hpp"
 #include "daemon/commands.hpp"
 #include "daemon/daemon.hpp"
+#include "daemon/gains_check.hpp"
 
 namespace contour::daemon {
 
@@ -111,6 +112,13 @@ json Daemon::status_json() {
          {"missed_tpdos", st.missed_tpdos},
          {"velocity_clamps", st.velocity_clamps},
          {"accel_clamps", st.accel_clamps},
+         {"chatter",
+          {{"level", st.chatter_level == 2 ? "fault" : st.chatter_level == 1 ? "warning" : "ok"},
+           {"window_mm_s", arr3(st.chatter_window_mm_s, axes)},
+           {"window_clamps_per_s", arr3(st.chatter_window_clamps_per_s, axes)},
+           {"job", st.chatter_job},
+           {"job_rms_mm_s", arr3(st.job_chatter_rms_mm_s, axes)},
+           {"job_max_mm_s", arr3(st.job_chatter_max_mm_s, axes)}}},
          {"limits_generation", st.limits_generation},
          {"stop", to_string(st.stop_phase)},
          {"soft_limits_mm", {{"min", arr3(st.soft_min_mm, axes)}, {"max", arr3(st.soft_max_mm, axes)}}},
@@ -333,7 +341,11 @@ json Daemon::result_json(std::uint64_t job) {
           {"samples", rs.samples},
           {"telemetry_dropped", writer_->dropped()},
           {"faults", faults},
-          {"overruns", loop_->stats().overruns.load() - ov0}};
+          {"overruns", loop_->stats().overruns.load() - ov0},
+          // RMS / max of the cycle-to-cycle change of each axis' velocity command over the run
+          // (issue 16; null once a later program has run).
+          {"command_chatter_rms_mm_s", st.chatter_job == job ? arr3(st.job_chatter_rms_mm_s, loop_->axes()) : json()},
+          {"command_chatter_max_mm_s", st.chatter_job == job ? arr3(st.job_chatter_max_mm_s, loop_->axes()) : json()}};
 }
 
 void Daemon::free_released_jobs() {
@@ -485,14 +497,17 @@ json Daemon::cmd_gains(const json& req) {
       throw CommandError("unknown gain '" + k + "' (kp, ki_per_s, kd_s, ff, cp, ci_per_s, cd_s, coupling)");
     }
   }
-  // Stability check of the normal-direction loop (control/servo_controller.hpp loop_margin).
-  for (int i = 0; i < p.axes; ++i) {
-    const auto m = control::loop_margin(p.drive[static_cast<std::size_t>(i)], p.axis[static_cast<std::size_t>(i)],
-                                        p.coupling, p.delay_cycles, p.delay_compensation);
-    if (!(m.spectral_radius < 1.0)) {
-      throw CommandError("gains rejected: axis " + std::to_string(i) +
-                         " loop would be unstable (spectral radius " + std::to_string(m.spectral_radius) + ")");
-    }
+  // A gain the active law does not use is refused (it would be "accepted" and change nothing).
+  for (auto it = set.begin(); it != set.end(); ++it) {
+    const std::string why = inactive_gain_reason(it.key(), p);
+    if (!why.empty()) throw CommandError("gains rejected: " + why);
+  }
+  // Stability check against the loop the daemon runs (daemon/gains_check.hpp): refused with the
+  // verdict's reason (axis, case, figure); the running gains stay as they are.
+  const control::StabilityVerdict v = check_gains(p, cfg_.machine);
+  if (!v.stable) {
+    spdlog::warn("gains rejected: {}", v.reason);
+    throw CommandError("gains rejected: " + v.reason);
   }
   std::uint64_t gen = 0;
   try {

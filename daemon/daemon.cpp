@@ -1,4 +1,5 @@
 #include "daemon/daemon.hpp"
+#include "daemon/gains_check.hpp"
 
 #include <signal.h>
 #include <spdlog/spdlog.h>
@@ -378,6 +379,8 @@ void Daemon::reload_config() {
   if (any_gains) {
     try {
       const auto p = servo_params_for(n.control);
+      const control::StabilityVerdict v = check_gains(p, cfg_.machine);
+      if (!v.stable) throw std::runtime_error(v.reason);
       const auto gen = loop_->stage_gains(p);
       cfg_.control = n.control;
       spdlog::info("SIGHUP: control gains staged (generation {}, state {})", gen,
@@ -553,6 +556,15 @@ int Daemon::run() {
   }
   try {
     check_paths();
+    // The configured gains against the loop this machine runs (daemon/gains_check.hpp): a set
+    // that would oscillate is a configuration error, before any drive is enabled.
+    {
+      const control::StabilityVerdict v = check_gains(servo_params_for(cfg_.control), cfg_.machine);
+      if (!v.stable) {
+        throw StartupConfigError(opt_.config_path + ": control: gains refused by the stability check: " +
+                                 v.reason);
+      }
+    }
     start_components();
   } catch (const StartupConfigError& e) {
     spdlog::critical("start-up failed: {}", e.what());

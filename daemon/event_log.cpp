@@ -79,6 +79,17 @@ std::string_view to_string(CommandKind k) noexcept {
   return "?";
 }
 
+// The limit-cycle watchdog's figure (safety.chatter): which one, its value and the level crossed.
+static std::string chatter_figure_text(const RtEvent& e) {
+  std::ostringstream o;
+  if (e.detail == 2) {
+    o << "clamped cycles " << e.value << "/s > " << e.limit << "/s (safety.chatter)";
+  } else {
+    o << "command chatter " << e.value << " mm/s RMS > " << e.limit << " mm/s (safety.chatter)";
+  }
+  return o.str();
+}
+
 std::string describe(const RtEvent& e) {
   std::ostringstream o;
   o << "cycle " << e.cycle << ": ";
@@ -107,7 +118,7 @@ std::string describe(const RtEvent& e) {
       } else if (e.cause == FaultCause::kNmtStateChange) {
         o << ": node " << e.value << " is no longer NMT operational";
       } else if (e.cause == FaultCause::kLimitCycle) {
-        o << ": " << e.value << " > " << e.limit;
+        o << ": " << chatter_figure_text(e);
       }
       break;
     case EventKind::kUnderrun: o << "segment queue underrun: feed hold on the path at "
@@ -138,6 +149,9 @@ std::string describe(const RtEvent& e) {
       break;
     case EventKind::kProgramPause:
       o << "program paused (M0/M1/M6): waits for resume";
+      break;
+    case EventKind::kLimitCycleWarning:
+      o << "LIMIT CYCLE WARNING axis " << e.axis << ": " << chatter_figure_text(e);
       break;
     case EventKind::kStandstillTimeout:
       o << "STANDSTILL TIMEOUT: axis " << e.axis << " still ";
@@ -180,7 +194,7 @@ void EventLogger::drain() {
       spdlog::error("{}", text);
     } else if (e.kind == EventKind::kCommandRefused || e.kind == EventKind::kUnderrun ||
                e.kind == EventKind::kProgramAborted || e.kind == EventKind::kForceFallback ||
-               e.kind == EventKind::kForceCeiling) {
+               e.kind == EventKind::kForceCeiling || e.kind == EventKind::kLimitCycleWarning) {
       spdlog::warn("{}", text);
     } else {
       spdlog::info("{}", text);

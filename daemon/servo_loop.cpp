@@ -57,6 +57,21 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
   ctrl_.configure(base_params_);
   applied_params_ = staged_params_ = base_params_;
   model_.configure(config::make_model_params(cfg.control));
+  {
+    const auto& w = cfg.safety.chatter;
+    control::ChatterMonitorParams cp;
+    cp.period_s = period_s_;
+    cp.window_s = std::max(w.window_s, control::ChatterMonitor::kBlocks * period_s_);
+    cp.warn_chatter_mm_s = w.warn_mm_s;
+    cp.warn_clamps_per_s = w.warn_clamps_per_s;
+    cp.warn_time_s = w.warn_s;
+    cp.fault_chatter_mm_s = w.fault_mm_s;
+    cp.fault_clamps_per_s = w.fault_clamps_per_s;
+    cp.fault_time_s = w.fault_s;
+    chatter_mon_.configure(cp, axes_);
+    chatter_enabled_ = w.enable;
+    job_chatter_.reset(axes_);
+  }
   publish();
 }
 
@@ -118,8 +133,10 @@ std::uint64_t ServoLoop::stage_limits(const LiveLimits& l) {
   return gen;
 }
 
-void ServoLoop::emit(EventKind k, FaultCause c, int axis, double value, double limit) noexcept {
+void ServoLoop::emit(EventKind k, FaultCause c, int axis, double value, double limit,
+                     std::uint8_t detail) noexcept {
   RtEvent e;
+  e.detail = detail;
   e.cycle = cycle_;
   e.kind = k;
   e.from = sm_.state();
@@ -151,7 +168,7 @@ void ServoLoop::raise_fault(const FaultReport& f) noexcept {
   fault_axis_ = f.axis;
   fault_value_ = f.value;
   fault_limit_ = f.limit;
-  emit(EventKind::kFault, f.cause, f.axis, f.value, f.limit);
+  emit(EventKind::kFault, f.cause, f.axis, f.value, f.limit, f.detail);
   transition(t, f.cause);
   detach_job(false);
   jog_.cancel();
@@ -484,6 +501,7 @@ void ServoLoop::take_staged() noexcept {
     gains_cycle_ = cycle_;
     staged_ready_.store(false, std::memory_order_release);
     emit(EventKind::kGainsSwapped, FaultCause::kNone, -1, static_cast<double>(gains_generation_));
+    chatter_mon_.reset();  // judged afresh with the new gains
   }
   if (staged_limits_ready_.load(std::memory_order_acquire)) {
     limits_ = staged_limits_;
@@ -635,6 +653,7 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
     eps_norm = ce.eps.norm();
     control::Vec3 u = control::Vec3::Zero();
     ctrl_.update(ref_, p_hat, ce, v_ref, u);
+    clamped_.fill(false);
     for (int i = 0; i < axes_; ++i) {
       const auto a = static_cast<std::size_t>(i);
       double v = gain_per_s_[a] * u[i];
@@ -643,6 +662,7 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
       if (std::abs(v) > vmax) {
         v = std::copysign(vmax, v);
         ++clamps_;
+        clamped_[a] = true;
       }
       // Acceleration clamp. A velocity-mode drive follows its target with the lag tau of its
       // velocity loop, so the acceleration it will produce is (v_target - v_actual) / tau: the
@@ -661,6 +681,7 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
         if (v > va + dv || v < va - dv) {
           v = std::clamp(v, va - dv, va + dv);
           ++accel_clamps_;
+          clamped_[a] = true;
         }
       }
       v_cmd_[a] = v;
@@ -732,11 +753,48 @@ void ServoLoop::supervise(MachineState st, bool servo, const Eigen::Vector3d& v_
       raise_fault(f);
     }
   }
+  watch_chatter(servo);
   // Program end: once the reference has stopped, wait for the tool to arrive (in position).
   if (program_.settling() && program_.attached() && sm_.state() == MachineState::kRunning &&
       program_.settled(ref_, fb_.act_mm, axes_)) {
     detach_job(true);
     transition(sm_.apply(Request::kDone), FaultCause::kNone);
+  }
+}
+
+// Issue 16: a limit cycle or chattering command while the axes servo (READY, RUNNING, HOLD) is
+// first a warning event, then a FAULT (controlled stop) naming the axis and the figure
+// (control::ChatterMonitor; thresholds safety.chatter). Outside servo the watchdog starts afresh.
+// Also accumulates the running program's chatter figure (status, `result`). RT: no allocation.
+void ServoLoop::watch_chatter(bool servo) noexcept {
+  if (program_.attached()) {
+    const std::uint64_t id = program_.job()->id;
+    if (id != job_chatter_id_) {
+      job_chatter_id_ = id;
+      job_chatter_.reset(axes_);
+    }
+    job_chatter_.add(v_cmd_);
+  }
+  if (!servo || !chatter_enabled_ || sm_.state() == MachineState::kFault ||
+      sm_.state() == MachineState::kEstop) {
+    if (chatter_armed_) chatter_mon_.reset();
+    chatter_armed_ = false;
+    return;
+  }
+  chatter_armed_ = true;
+  const control::ChatterReport rep = chatter_mon_.update(v_cmd_, clamped_);
+  if (!rep.raised) return;
+  const auto detail = static_cast<std::uint8_t>(rep.figure);
+  if (rep.level == control::ChatterLevel::kFault) {
+    FaultReport f;
+    f.cause = FaultCause::kLimitCycle;
+    f.axis = rep.axis;
+    f.value = rep.value;
+    f.limit = rep.limit;
+    f.detail = detail;
+    raise_fault(f);
+  } else if (rep.level == control::ChatterLevel::kWarning) {
+    emit(EventKind::kLimitCycleWarning, FaultCause::kLimitCycle, rep.axis, rep.value, rep.limit, detail);
   }
 }
 
@@ -809,6 +867,21 @@ void ServoLoop::publish() noexcept {
   pub_.recording = recording_;
   pub_.drives_enabled = all_axes_enabled();
   pub_.accel_clamps = accel_clamps_;
+  {
+    std::uint8_t lvl = 0;
+    for (int i = 0; i < 3; ++i) {
+      const auto a = static_cast<std::size_t>(i);
+      const bool on = i < axes_;
+      pub_.chatter_window_mm_s[a] = on ? chatter_mon_.window_chatter_mm_s(i) : 0.0;
+      pub_.chatter_window_clamps_per_s[a] = on ? chatter_mon_.window_clamps_per_s(i) : 0.0;
+      if (on) lvl = std::max(lvl, static_cast<std::uint8_t>(chatter_mon_.level(i)));
+    }
+    pub_.chatter_level = lvl;
+    const control::ChatterFigure jf = job_chatter_.figure();
+    pub_.chatter_job = job_chatter_id_;
+    pub_.job_chatter_rms_mm_s = jf.rms_mm_s;
+    pub_.job_chatter_max_mm_s = jf.max_mm_s;
+  }
   pub_.limits_generation = limits_generation_;
   pub_.force_available = force_.configured();
   pub_.force_state = fb_.force.state;

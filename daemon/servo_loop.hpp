@@ -40,6 +40,7 @@
 #include <mutex>
 
 #include "config/config.hpp"
+#include "control/chatter_monitor.hpp"
 #include "control/contour_error.hpp"
 #include "control/fir_interpolator.hpp"
 #include "control/servo_controller.hpp"
@@ -87,6 +88,8 @@ enum class EventKind : std::uint8_t {
   kProgramPause,   // M0/M1/M6 reached: axis = message id (ProgramPlanner::message); waits for resume
   kStandstillTimeout,  // a stop's axes did not come to rest: axis, value = speed mm/s (NaN: no
                        // fresh feedback), limit = safety.standstill_timeout_s; quick stop now
+  kLimitCycleWarning,  // safety.chatter warning level held: axis, value/limit, detail = figure
+                       // (control::ChatterFigureKind: 1 command chatter mm/s, 2 clamped cycles/s)
 };
 
 // Fixed-size event record (RT -> logger thread).
@@ -101,6 +104,7 @@ struct RtEvent {
   double value = 0.0;  // fault: the measured value; limit in `limit`
   double limit = 0.0;
   std::uint64_t job = 0;
+  std::uint8_t detail = 0;  // kLimitCycle fault / kLimitCycleWarning: control::ChatterFigureKind
 };
 
 // One telemetry sample (RT -> writer thread).
@@ -171,6 +175,15 @@ struct LoopStatus {
   bool drives_enabled = false;     // every axis drive in operation enabled
   std::uint64_t accel_clamps = 0;
   std::uint64_t limits_generation = 0;
+  // Command chatter (issue 16, control/chatter_monitor.hpp): the watchdog's sliding-window figures
+  // per axis, and the RMS/max of |v(k) - v(k-1)| over the program chatter_job (the running one,
+  // else the last one that ran).
+  std::array<double, 3> chatter_window_mm_s{};
+  std::array<double, 3> chatter_window_clamps_per_s{};
+  std::uint8_t chatter_level = 0;  // control::ChatterLevel: 0 ok, 1 warning, 2 fault
+  std::uint64_t chatter_job = 0;
+  std::array<double, 3> job_chatter_rms_mm_s{};
+  std::array<double, 3> job_chatter_max_mm_s{};
   // Force channel (step 3 / 7).
   bool force_available = false;     // an RtIo with a dynamometer is attached
   drivers::modbus::ForceState force_state = drivers::modbus::ForceState::kNoData;
@@ -288,7 +301,8 @@ class ServoLoop {
   void transition(const Transition& t, FaultCause cause) noexcept;
   void raise_fault(const FaultReport& f) noexcept;
   void emit(EventKind k, FaultCause c = FaultCause::kNone, int axis = -1, double value = 0.0,
-            double limit = 0.0) noexcept;
+            double limit = 0.0, std::uint8_t detail = 0) noexcept;
+  void watch_chatter(bool servo) noexcept;  // safety.chatter watchdog and the job's figure
   void detach_job(bool ok) noexcept;
   void refuse_command(CommandKind k) noexcept;  // kCommandRefused event
   bool try_reset() noexcept;  // FAULT/ESTOP -> enable when every cause is gone
@@ -362,6 +376,12 @@ class ServoLoop {
   Eigen::Vector3d ref_prev_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d eps_ = Eigen::Vector3d::Zero();
   std::array<double, 3> v_cmd_{};
+  std::array<bool, 3> clamped_{};  // this cycle's command was clamped (velocity or acceleration)
+  control::ChatterMonitor chatter_mon_;
+  bool chatter_enabled_ = true;
+  bool chatter_armed_ = false;      // the watchdog has seen servo cycles since its last reset
+  control::ChatterMeter job_chatter_;
+  std::uint64_t job_chatter_id_ = 0;
   std::array<double, kMaxAxes> v_est_{};  // measured velocity, or the drive-model estimate when stale
   Eigen::Vector3d v_ref_ = Eigen::Vector3d::Zero();  // reference velocity of the last cycle
   bool last_servo_ = false;                            // the last cycle servoed the axes

@@ -5,12 +5,15 @@
 // contour error is the distance to the programmed path (control/true_contour_error.hpp).
 //
 // Last stdout line: one JSON object (controller, feed_mm_min, samples, max_contour_error_um,
-// rms_contour_error_um, max_model_error_blu, end_position_error_um, stable, ...). With --compare
+// rms_contour_error_um, max_model_error_blu, end_position_error_um, stable,
+// command_chatter_rms_mm_s / command_chatter_max_mm_s (per axis: the cycle-to-cycle change of the
+// velocity command K u, issue 16), ...). With --compare
 // it holds one object per controller under "runs" plus the P/CCC and PID/CCC ratios.
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -26,6 +29,7 @@
 #include "config/config.hpp"
 #include "config/control_config.hpp"
 #include "config/curve_file.hpp"
+#include "control/chatter_monitor.hpp"
 #include "control/contour_error.hpp"
 #include "control/gcode.hpp"
 #include "control/reference_path.hpp"
@@ -78,6 +82,51 @@ Program load_program(const std::string& path) {
   return p;
 }
 
+// A contourd telemetry CSV's reference (rx_mm, ry_mm, rz_mm), from the first READY/RUNNING row
+// (state >= 2) on: one point per cycle, velocity by differences.
+std::vector<control::ReferencePoint> load_reference_csv(const std::string& path, double period_s) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open");
+  std::string line;
+  if (!std::getline(in, line)) throw std::runtime_error(path + ": empty");
+  std::vector<std::string> head;
+  {
+    std::stringstream ss(line);
+    std::string f;
+    while (std::getline(ss, f, ',')) head.push_back(f);
+  }
+  auto col = [&](const char* name) {
+    for (std::size_t i = 0; i < head.size(); ++i) {
+      if (head[i] == name) return i;
+    }
+    throw std::runtime_error(path + ": no column " + name);
+  };
+  const std::size_t cs = col("state"), cx = col("rx_mm"), cy = col("ry_mm"), cz = col("rz_mm");
+  std::vector<control::ReferencePoint> ref;
+  int row = 1;
+  while (std::getline(in, line)) {
+    ++row;
+    std::vector<std::string> c;
+    std::stringstream ss(line);
+    std::string f;
+    while (std::getline(ss, f, ',')) c.push_back(f);
+    if (c.size() <= std::max({cs, cx, cy, cz})) {
+      throw std::runtime_error(path + ":" + std::to_string(row) + ": short row");
+    }
+    try {
+      if (std::stoi(c[cs]) < 2) continue;
+      control::ReferencePoint p;
+      p.r_mm = Vec3(std::stod(c[cx]), std::stod(c[cy]), std::stod(c[cz]));
+      if (!ref.empty()) p.v_mm_s = (p.r_mm - ref.back().r_mm) / period_s;
+      ref.push_back(p);
+    } catch (const std::exception&) {
+      throw std::runtime_error(path + ":" + std::to_string(row) + ": not a number");
+    }
+  }
+  if (ref.size() < 3) throw std::runtime_error(path + ": fewer than 3 reference rows");
+  return ref;
+}
+
 struct Sample {
   double t_s;
   Vec3 r, p;
@@ -98,6 +147,7 @@ struct RunResult {
   double max_tracking_err_um = 0.0;
   bool stable = true;
   long lag_overflows = 0;
+  control::ChatterFigure chatter;  // velocity command K u, cycle-to-cycle change (issue 16)
   std::vector<Sample> trace;
 };
 
@@ -107,11 +157,17 @@ struct RunSetup {
   const std::vector<control::ReferencePoint>* ref = nullptr;
   const control::CurveDistance* curve_dist = nullptr;
   const control::SegmentPathDistance* seg_dist = nullptr;
-  int delay_cycles = 1;
+  int delay_cycles = 1;        // the controller's (Smith predictor) delay
+  int plant_delay_cycles = 1;  // the drives' real delay (differs to show a mismatch)
   double settle_s = 1.0;
   double blu_mm = 0.0005;
   bool quantise = true;
   bool keep_trace = false;
+  // The daemon's control stage (daemon/servo_loop.cpp control_step): v = K u, |v| <= v_max,
+  // v within v_actual +- a_max tau; the drives get the clamped v. command_applied: the controller
+  // is told (ServoController::command_applied, the wiring proposed for the daemon).
+  bool daemon_clamps = false;
+  bool command_applied = false;
 };
 
 RunResult run_one(const RunSetup& s, config::ControllerType type) {
@@ -125,12 +181,15 @@ RunResult run_one(const RunSetup& s, config::ControllerType type) {
     dp[i].period_s = cfg.machine.period_s;
     dp[i].delay_cycles = s.delay_cycles;
     if (!s.quantise) dp[i].blu_mm = 0.0;
-    drive[i].configure(dp[i]);
+    control::FeedDriveParams plant = dp[i];
+    plant.delay_cycles = s.plant_delay_cycles;
+    drive[i].configure(plant);
     drive[i].reset(ref.front().r_mm[static_cast<Eigen::Index>(i)]);
   }
   control::ServoController ctrl(
       config::make_servo_params(cfg.control, type, dp, axes, cfg.machine.period_s, s.delay_cycles));
   control::ContourErrorModel model(config::make_model_params(cfg.control));
+  control::ChatterMeter chatter(axes);
 
   RunResult res;
   res.controller = config::controller_type_name(type);
@@ -157,7 +216,25 @@ RunResult run_one(const RunSetup& s, config::ControllerType type) {
     if (ce.status == control::ContourStatus::kLagOverflow) ++res.lag_overflows;
     Vec3 u;
     ctrl.update(r, p_hat, ce, v, u);
+    // The velocity command a velocity-mode drive would get (v = K u, mm/s).
+    std::array<double, 3> v_cmd{};
+    for (std::size_t i = 0; i < 3; ++i) {
+      const auto e = static_cast<Eigen::Index>(i);
+      double vi = dp[i].gain_per_s * u[e];
+      if (s.daemon_clamps) {
+        const auto& ax = cfg.machine.axes[i];
+        const double vmax = ax.max_velocity_mm_min / 60.0;
+        vi = std::clamp(vi, -vmax, vmax);
+        const double dv = ax.max_accel_mm_s2 * ax.drive.tau_s;
+        const double va = drive[i].velocity_mm_s();
+        if (dv > 0.0) vi = std::clamp(vi, va - dv, va + dv);
+        u[e] = vi / dp[i].gain_per_s;
+      }
+      v_cmd[i] = vi;
+    }
+    if (s.command_applied) ctrl.command_applied(u);
     for (std::size_t i = 0; i < 3; ++i) drive[i].step(u[static_cast<Eigen::Index>(i)]);
+    chatter.add(v_cmd);
 
     if (!p_true.allFinite() || p_true.norm() > 1e6) {
       res.stable = false;
@@ -200,6 +277,7 @@ RunResult run_one(const RunSetup& s, config::ControllerType type) {
     res.samples = k + 1;
   }
   res.path_samples = n;
+  res.chatter = chatter.figure();
   res.rms_contour_um = count > 0 ? std::sqrt(sum2 / static_cast<double>(count)) : 0.0;
   Vec3 p_end;
   for (std::size_t i = 0; i < 3; ++i) p_end[static_cast<Eigen::Index>(i)] = drive[i].position_mm();
@@ -225,6 +303,11 @@ nlohmann::json to_json(const RunResult& r) {
   j["max_tracking_error_um"] = r.max_tracking_err_um;
   j["lag_overflows"] = r.lag_overflows;
   j["stable"] = r.stable;
+  // Issue 16 chatter figure: RMS and largest cycle-to-cycle change of the velocity command K u.
+  j["command_chatter_rms_mm_s"] = std::vector<double>(r.chatter.rms_mm_s.begin(),
+                                                      r.chatter.rms_mm_s.end());
+  j["command_chatter_max_mm_s"] = std::vector<double>(r.chatter.max_mm_s.begin(),
+                                                      r.chatter.max_mm_s.end());
   return j;
 }
 
@@ -300,8 +383,11 @@ int run_contour(int argc, char** argv) {
   CLI::App app{"Seed 000: contour-error model and P / PID / cross-coupled control", "contour"};
   std::string path, controller = "ccc", config_path, csv, plot, model_name, window_rule;
   double feed_mm_min = 4000.0;
-  int delay_cycles = -1;
-  double settle_s = 1.0;
+  int delay_cycles = -1, plant_delay_cycles = -1;
+  std::string reference_csv;
+  bool daemon_clamps = false, command_applied = false;
+  double settle_s = 1.0, model_blend_ms = -1.0, lowpass_ms = -1.0;
+  std::string same_geometry;
   bool compare = false, no_quantise = false, no_delay_comp = false, no_integrator_fix = false;
   app.add_option("--path", path, "program: .ngc G-code or .yaml parametric curve")->required();
   app.add_option("--controller", controller, "p | pid | ccc")
@@ -312,6 +398,25 @@ int run_contour(int argc, char** argv) {
   app.add_option("--delay-cycles", delay_cycles,
                  "command transport delay in cycles (default: the config's drives, 1 = CANopen)")
       ->check(CLI::Range(0, control::FeedDrive::kMaxDelay));
+  app.add_option("--plant-delay-cycles", plant_delay_cycles,
+                 "the drives' real transport delay when it differs from the controller's "
+                 "(--delay-cycles); default: the same")
+      ->check(CLI::Range(0, control::FeedDrive::kMaxDelay));
+  app.add_option("--model-blend-ms", model_blend_ms,
+                 "override control.derivative.model_blend_ms (0 = off)")
+      ->check(CLI::Range(0.0, 1000.0));
+  app.add_option("--lowpass-ms", lowpass_ms, "override control.derivative.lowpass_ms (0 = off)")
+      ->check(CLI::Range(0.0, 1000.0));
+  app.add_option("--same-geometry", same_geometry, "override control.derivative.same_geometry")
+      ->check(CLI::IsMember({"never", "ahead", "always"}));
+  app.add_option("--reference-csv", reference_csv,
+                 "replay a recorded reference (contourd telemetry CSV, e.g. from `contour-sim "
+                 "run --csv`: rx_mm, ry_mm, rz_mm from READY on) instead of interpolating --path; "
+                 "--path still gives the programmed path for the contour error");
+  app.add_flag("--daemon-clamps", daemon_clamps,
+               "apply the daemon's velocity and acceleration clamps to the command");
+  app.add_flag("--command-applied", command_applied,
+               "tell the controller the clamped command (ServoController::command_applied)");
   app.add_option("--csv", csv, "write the time series of the chosen controller");
   app.add_option("--plot", plot, "PNG of contour error vs time (gnuplot)");
   app.add_flag("--compare", compare, "run P, PID and CCC; plot them together");
@@ -349,6 +454,15 @@ int run_contour(int argc, char** argv) {
   if (no_delay_comp) cfg.control.delay_compensation = false;
   if (no_integrator_fix) cfg.control.coupling.remove_tangential_integral = false;
   if (delay_cycles < 0) delay_cycles = cfg.machine.axes[0].drive.delay_cycles;
+  if (plant_delay_cycles < 0) plant_delay_cycles = delay_cycles;
+  if (model_blend_ms >= 0.0) cfg.control.derivative.model_blend_s = model_blend_ms / 1000.0;
+  if (lowpass_ms >= 0.0) cfg.control.derivative.lowpass_s = lowpass_ms / 1000.0;
+  if (!same_geometry.empty()) {
+    cfg.control.derivative.same_geometry = same_geometry == "never" ? control::SameGeometry::kNever
+                                           : same_geometry == "always"
+                                               ? control::SameGeometry::kAlways
+                                               : control::SameGeometry::kAhead;
+  }
 
   const Program prog = load_program(path);
   const double feed_mm_s = feed_mm_min / 60.0;
@@ -362,6 +476,7 @@ int run_contour(int argc, char** argv) {
     ref = control::sample_polyline(prog.vertices, feed_mm_s, cfg.machine.period_s);
     sd = std::make_unique<control::SegmentPathDistance>(prog.segments);
   }
+  if (!reference_csv.empty()) ref = load_reference_csv(reference_csv, cfg.machine.period_s);
 
   RunSetup setup;
   setup.cfg = &cfg;
@@ -370,6 +485,9 @@ int run_contour(int argc, char** argv) {
   setup.curve_dist = cd.get();
   setup.seg_dist = sd.get();
   setup.delay_cycles = delay_cycles;
+  setup.plant_delay_cycles = plant_delay_cycles;
+  setup.daemon_clamps = daemon_clamps || command_applied;
+  setup.command_applied = command_applied;
   setup.settle_s = settle_s;
   setup.blu_mm = 1.0 / cfg.machine.axes[0].counts_per_mm;
   setup.quantise = !no_quantise;
@@ -409,10 +527,34 @@ int run_contour(int argc, char** argv) {
       control::loop_margin(xd, xg, cfg.control.coupling, delay_cycles,
                            cfg.control.delay_compensation);
 
+  // Issue 16 stability check of the chosen controller against the drives as simulated here
+  // (plant delay = --plant-delay-cycles): linear margins + closed-loop simulation at rest.
+  control::LoopPlant plant = config::make_loop_plant(cfg.machine);
+  for (int i = 0; i < plant.axes; ++i) {
+    plant.axis[static_cast<std::size_t>(i)].delay_cycles = plant_delay_cycles;
+    if (no_quantise) plant.axis[static_cast<std::size_t>(i)].blu_mm = 0.0;
+  }
+  std::array<control::FeedDriveParams, 3> sdp{};
+  for (std::size_t i = 0; i < 3; ++i) {
+    sdp[i] = cfg.machine.axes[i].drive;
+    sdp[i].period_s = cfg.machine.period_s;
+  }
+  const control::StabilityVerdict verdict = control::check_loop_stability(
+      config::make_servo_params(cfg.control, chosen, sdp, 3, cfg.machine.period_s, delay_cycles),
+      plant);
+
   nlohmann::json j = to_json(*main_run);
+  j["stability_check"] = {{"stable", verdict.stable},
+                          {"reason", verdict.reason},
+                          {"spectral_radius", verdict.spectral_radius},
+                          {"rest_peak_to_peak_um", verdict.rest_peak_to_peak_um},
+                          {"rest_clamps_per_s", verdict.rest_clamps_per_s}};
   j["path"] = path;
   j["feed_mm_min"] = feed_mm_min;
   j["delay_cycles"] = delay_cycles;
+  j["plant_delay_cycles"] = plant_delay_cycles;
+  j["derivative_model_blend_ms"] = cfg.control.derivative.model_blend_s * 1000.0;
+  j["derivative_lowpass_ms"] = cfg.control.derivative.lowpass_s * 1000.0;
   j["delay_compensation"] = cfg.control.delay_compensation;
   j["coupled_loop_spectral_radius"] = lm.spectral_radius;
   j["coupled_loop_gain_margin"] = lm.gain_margin;

@@ -229,6 +229,19 @@ void print_run_summary(const json& r) {
               static_cast<unsigned long long>(r.value("overruns", 0ULL)),
               static_cast<unsigned long long>(r.value("telemetry_dropped", 0ULL)),
               r.contains("faults") && !r["faults"].empty() ? r["faults"].dump().c_str() : "none");
+  // Issue 16: RMS / max of the cycle-to-cycle change of each axis' velocity command.
+  const json& rms = r.contains("command_chatter_rms_mm_s") ? r["command_chatter_rms_mm_s"] : json();
+  const json& mx = r.contains("command_chatter_max_mm_s") ? r["command_chatter_max_mm_s"] : json();
+  if (rms.is_array() && mx.is_array() && rms.size() == mx.size()) {
+    std::string line = "command chatter (RMS / max of the cycle-to-cycle change, mm/s):";
+    static const char* kNames[] = {"X", "Y", "Z"};
+    for (std::size_t i = 0; i < rms.size() && i < 3; ++i) {
+      char b[96];
+      std::snprintf(b, sizeof b, " %s %.2f / %.1f", kNames[i], rms[i].get<double>(), mx[i].get<double>());
+      line += b;
+    }
+    std::printf("%s\n", line.c_str());
+  }
 }
 
 struct RunOptions {

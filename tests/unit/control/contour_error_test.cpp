@@ -352,3 +352,27 @@ TEST(ContourErrorModel, CycleDoesNotAllocate) {
   EXPECT_EQ(guard.counts().total(), 0u);
   EXPECT_TRUE(std::isfinite(acc));
 }
+
+TEST(EpsOn, SameGeometryGivesTheModelsEpsAndMovesWithThePoint) {
+  // eps_on(g, P) == g.eps for the point that produced g, for each branch.
+  ContourErrorModel m;
+  for (int k = 0; k < 20; ++k) m.push_reference(Vec3(10.0 * std::cos(0.01 * k), 10.0 * std::sin(0.01 * k), 0.0));
+  const Vec3 p(9.9, 0.05, 0.02);
+  const ContourErrorResult g = m.update(p);
+  ASSERT_EQ(g.branch, ContourBranch::kCircle);
+  EXPECT_NEAR((eps_on(g, p) - g.eps).norm(), 0.0, 1e-12);
+  // Another point on the same circle: radial distance to radius 10 and out of plane.
+  const Vec3 q(0.0, 9.5, -0.1);
+  EXPECT_NEAR((eps_on(g, q) - Vec3(0.0, 0.5, 0.1)).norm(), 0.0, 1e-9);
+  ContourErrorModel line;
+  for (int k = 0; k < 5; ++k) line.push_reference(Vec3(k, 0, 0));
+  const ContourErrorResult gl = line.update(Vec3(2.2, 0.3, 0.0));
+  ASSERT_EQ(gl.branch, ContourBranch::kLine);
+  EXPECT_NEAR((eps_on(gl, Vec3(7.0, -1.0, 2.0)) - Vec3(0.0, 1.0, -2.0)).norm(), 0.0, 1e-12);
+  ContourErrorModel point;
+  point.push_reference(Vec3(1, 2, 3));
+  const ContourErrorResult gp = point.update(Vec3(0, 0, 0));
+  EXPECT_NEAR((eps_on(gp, Vec3(1, 1, 1)) - Vec3(0, 1, 2)).norm(), 0.0, 1e-12);
+  // The circle's axis: never NaN.
+  EXPECT_TRUE(eps_on(g, Vec3(0, 0, 4)).allFinite());
+}
