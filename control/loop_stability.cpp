@@ -3,7 +3,8 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
+#include <charconv>
+#include <string_view>
 #include <numbers>
 #include <stdexcept>
 #include <vector>
@@ -115,10 +116,25 @@ void check_plant(const LoopPlant& plant) {
   }
 }
 
+// One number in a text, printf-like: "prefix %.Nf suffix" or "%g" (control/ has no stdio).
 std::string fmt(const char* f, double a) {
+  const std::string_view s(f);
+  const std::size_t pct = s.find('%');
+  if (pct == std::string_view::npos) return std::string(s);
+  std::size_t i = pct + 1;
+  std::chars_format form = std::chars_format::general;
+  int precision = 6;
+  if (i < s.size() && s[i] == '.') {
+    precision = 0;
+    for (++i; i < s.size() && s[i] >= '0' && s[i] <= '9'; ++i) precision = precision * 10 + (s[i] - '0');
+  }
+  if (i < s.size() && s[i] == 'f') form = std::chars_format::fixed;
   char buf[64];
-  std::snprintf(buf, sizeof buf, f, a);
-  return buf;
+  const auto r = std::to_chars(buf, buf + sizeof buf, a, form, precision);
+  std::string out(s.substr(0, pct));
+  out.append(buf, r.ec == std::errc() ? r.ptr : buf);
+  out += s.substr(i + 1);
+  return out;
 }
 
 std::string corner_name(double gs, double ts) {
