@@ -545,3 +545,62 @@ TEST(CommandProtocol, ToLineIsOneLineEvenWithNewlinesAndBadUtf8InStrings) {
   EXPECT_EQ(back["error"], "a\nb\r\n");
   EXPECT_EQ(back["id"], "\xEF\xBF\xBD\xEF\xBF\xBD");  // U+FFFD twice
 }
+
+// A handler that waits for the loop (like `stop` until standstill) gives way when another client
+// sends what may be a safety command: the server thread is free again for that client's `estop`.
+// Without CommandServer::safety_request_waiting() the wait ran to its end (here 20 s) first.
+TEST(CommandServerLimits, AWaitingHandlerGivesWayToAnotherClientsEstop) {
+  CommandServerOptions o;
+  o.path = temp_socket_path();
+  CommandServer* srv = nullptr;
+  std::atomic<bool> gave_way{false};
+  std::atomic<bool> in_wait{false};
+  CommandServer s(o, [&](const json& req, const ClientInfo&) {
+    const std::string cmd = req.at("cmd").get<std::string>();
+    if (cmd == "slow") {
+      in_wait = true;
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+      while (std::chrono::steady_clock::now() < until) {
+        if (srv->safety_request_waiting()) {
+          gave_way = true;
+          break;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      return json{{"gave_way", gave_way.load()}};
+    }
+    if (cmd == "status") {
+      // Not a safety request: its presence alone must not end another handler's wait.
+      return json{{"state", "READY"}};
+    }
+    return json{{"done", cmd}};
+  });
+  srv = &s;
+  EXPECT_FALSE(s.safety_request_waiting()) << "false off the server thread";
+  s.start();
+  const int a = connect_to(o.path);
+  const int b = connect_to(o.path);
+  ASSERT_GE(a, 0);
+  ASSERT_GE(b, 0);
+  send_all(a, R"({"id":1,"cmd":"slow"})" "\n");
+  for (int i = 0; i < 5000 && !in_wait; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ASSERT_TRUE(in_wait.load());
+  // A status request from the other client does not end the wait ...
+  send_all(b, R"({"id":2,"cmd":"status"})" "\n");
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_FALSE(gave_way.load());
+  ::close(b);
+  // ... an estop does, and is served right after.
+  const int c = connect_to(o.path);
+  ASSERT_GE(c, 0);
+  send_all(c, R"({"id":3,"cmd":"estop"})" "\n");
+  const json rc = json::parse(read_line(c), nullptr, false);
+  ASSERT_TRUE(rc.is_object());
+  EXPECT_EQ(rc["result"]["done"], "estop");
+  const json ra = json::parse(read_line(a), nullptr, false);
+  ASSERT_TRUE(ra.is_object());
+  EXPECT_EQ(ra["result"]["gave_way"], true);
+  ::close(a);
+  ::close(c);
+  s.stop();
+}
