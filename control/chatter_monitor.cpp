@@ -47,9 +47,10 @@ ChatterFigure ChatterMeter::figure() const noexcept {
   ChatterFigure f;
   f.axes = axes_;
   f.steps = steps_;
+  const double inv_steps = steps_ > 0 ? 1.0 / static_cast<double>(steps_) : 0.0;
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
-    f.rms_mm_s[a] = steps_ > 0 ? std::sqrt(sum_sq_[a] / static_cast<double>(steps_)) : 0.0;
+    f.rms_mm_s[a] = std::sqrt(sum_sq_[a] * inv_steps);
     f.max_mm_s[a] = max_[a];
   }
   return f;
@@ -112,6 +113,22 @@ double ChatterMonitor::window_clamps_per_s(int axis) const noexcept {
          (static_cast<double>(n) * p_.period_s);
 }
 
+void ChatterMonitor::window_figures(std::array<double, kChatterMaxAxes>& chatter_mm_s,
+                                    std::array<double, kChatterMaxAxes>& clamps_per_s) const noexcept {
+  chatter_mm_s.fill(0.0);
+  clamps_per_s.fill(0.0);
+  const std::int64_t n = window_samples();
+  if (n <= 0) return;
+  const double inv_n = 1.0 / static_cast<double>(n);
+  const double inv_s = inv_n / p_.period_s;
+  for (int i = 0; i < axes_; ++i) {
+    const auto s = static_cast<std::size_t>(i);
+    const Axis& a = ax_[s];
+    chatter_mm_s[s] = std::sqrt((a.done_sq + a.cur_sq) * inv_n);
+    clamps_per_s[s] = static_cast<double>(a.done_clamps + a.cur_clamps) * inv_s;
+  }
+}
+
 ChatterReport ChatterMonitor::update(const std::array<double, kChatterMaxAxes>& v,
                                      const std::array<bool, kChatterMaxAxes>& clamped) noexcept {
   for (int i = 0; i < axes_; ++i) {
@@ -149,13 +166,21 @@ ChatterReport ChatterMonitor::update(const std::array<double, kChatterMaxAxes>& 
 
   ChatterReport out;
   const bool judged = blocks_done_ >= kBlocks - 1;
+  // Judged on the window sums against thresholds scaled to the window (no square root or
+  // division per cycle); the figures themselves are computed only for a report.
+  const auto n = static_cast<double>(window_samples());
+  const double window_s = n * p_.period_s;
+  const double warn_sq = p_.warn_chatter_mm_s * p_.warn_chatter_mm_s * n;
+  const double fault_sq = p_.fault_chatter_mm_s * p_.fault_chatter_mm_s * n;
+  const double warn_clamps = p_.warn_clamps_per_s * window_s;
+  const double fault_clamps = p_.fault_clamps_per_s * window_s;
   for (int i = 0; i < axes_; ++i) {
     const auto s = static_cast<std::size_t>(i);
     Axis& a = ax_[s];
-    const double chatter = judged ? window_chatter_mm_s(i) : 0.0;
-    const double rate = judged ? window_clamps_per_s(i) : 0.0;
-    const bool warn = chatter > p_.warn_chatter_mm_s || rate > p_.warn_clamps_per_s;
-    const bool fault = chatter > p_.fault_chatter_mm_s || rate > p_.fault_clamps_per_s;
+    const double sq = a.done_sq + a.cur_sq;
+    const auto clamps = static_cast<double>(a.done_clamps + a.cur_clamps);
+    const bool warn = judged && (sq > warn_sq || clamps > warn_clamps);
+    const bool fault = judged && (sq > fault_sq || clamps > fault_clamps);
     a.warn_cycles = warn ? a.warn_cycles + 1 : 0;
     a.fault_cycles = fault ? a.fault_cycles + 1 : 0;
     bool raised = false;
@@ -174,6 +199,8 @@ ChatterReport ChatterMonitor::update(const std::array<double, kChatterMaxAxes>& 
       out.level = level_[s];
       out.raised = raised;
       out.axis = i;
+      const double chatter = judged ? window_chatter_mm_s(i) : 0.0;
+      const double rate = judged ? window_clamps_per_s(i) : 0.0;
       const bool fault_level = level_[s] == ChatterLevel::kFault;
       const double chatter_limit = fault_level ? p_.fault_chatter_mm_s : p_.warn_chatter_mm_s;
       const double rate_limit = fault_level ? p_.fault_clamps_per_s : p_.warn_clamps_per_s;

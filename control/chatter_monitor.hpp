@@ -105,6 +105,10 @@ class ChatterMonitor {
   // Current window figures of one axis (0 before the first difference).
   [[nodiscard]] double window_chatter_mm_s(int axis) const noexcept;
   [[nodiscard]] double window_clamps_per_s(int axis) const noexcept;
+  // Both figures for every axis at once (zeros past the configured axes): one division, for
+  // the per-cycle status.
+  void window_figures(std::array<double, kChatterMaxAxes>& chatter_mm_s,
+                      std::array<double, kChatterMaxAxes>& clamps_per_s) const noexcept;
   [[nodiscard]] ChatterLevel level(int axis) const noexcept {
     return level_[static_cast<std::size_t>(axis)];
   }

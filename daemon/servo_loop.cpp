@@ -869,12 +869,9 @@ void ServoLoop::publish() noexcept {
   pub_.accel_clamps = accel_clamps_;
   {
     std::uint8_t lvl = 0;
-    for (int i = 0; i < 3; ++i) {
-      const auto a = static_cast<std::size_t>(i);
-      const bool on = i < axes_;
-      pub_.chatter_window_mm_s[a] = on ? chatter_mon_.window_chatter_mm_s(i) : 0.0;
-      pub_.chatter_window_clamps_per_s[a] = on ? chatter_mon_.window_clamps_per_s(i) : 0.0;
-      if (on) lvl = std::max(lvl, static_cast<std::uint8_t>(chatter_mon_.level(i)));
+    chatter_mon_.window_figures(pub_.chatter_window_mm_s, pub_.chatter_window_clamps_per_s);
+    for (int i = 0; i < axes_; ++i) {
+      lvl = std::max(lvl, static_cast<std::uint8_t>(chatter_mon_.level(i)));
     }
     pub_.chatter_level = lvl;
     const control::ChatterFigure jf = job_chatter_.figure();
