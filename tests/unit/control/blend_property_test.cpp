@@ -161,20 +161,23 @@ RunResult run(const std::vector<Block>& blocks, const Vector3d& start, BlendMeth
 
 }  // namespace
 
-// Unoptimised sanitizer builds (the `dev` preset) run seeds 1-3 (seed 3: the 101-tap filter):
-// the same checks at a tenth of the speed; optimised builds run all six.
+// Unoptimised sanitizer builds (the `dev` preset) run seeds 1 and 3 (seed 3: the 101-tap
+// filter): the same checks at a tenth of the speed; optimised builds run all six.
 #if defined(NDEBUG)
 constexpr unsigned kLastSeed = 6;
+constexpr bool kDebugSubset = false;
 #else
 constexpr unsigned kLastSeed = 3;
+constexpr bool kDebugSubset = true;
 #endif
 
 TEST(BlendProperty, RandomArcsCirclesHelicesRapidsHoldToleranceAndLimits) {
   int paper_broke = 0;
   const char* one = std::getenv("CONTOUR_BLEND_SEED");
-  if (kLastSeed < 6) std::printf("debug build: seeds 1-%u of 6 (optimised builds run all)\n", kLastSeed);
+  if (kDebugSubset) std::printf("debug build: seeds 1 and 3 of 6 (optimised builds run all)\n");
   for (unsigned seed = 1; seed <= kLastSeed; ++seed) {
     if (one != nullptr && std::to_string(seed) != one) continue;
+    if (kDebugSubset && one == nullptr && seed == 2) continue;
     const auto t0 = std::chrono::steady_clock::now();
     Vector3d start;
     const auto prog = random_program(seed, start);

