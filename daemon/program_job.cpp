@@ -21,6 +21,13 @@ SegmentRecord to_record(const control::PlannedSegment& s) noexcept {
   r.flood = s.flood;
   r.tool = s.tool;
   r.message_id = s.message_id;
+  r.start_offset_cycles = s.start_offset_cycles;
+  r.duration_cycles = s.duration_cycles;
+  r.speed_mm_min = s.speed_mm_min;
+  r.rapid = s.rapid;
+  r.user_m = s.user_m;
+  r.user_p = s.user_p;
+  r.user_q = s.user_q;
   return r;
 }
 
@@ -42,6 +49,13 @@ void from_record(const SegmentRecord& r, control::PlannedSegment& s) noexcept {
   s.flood = r.flood;
   s.tool = r.tool;
   s.message_id = r.message_id;
+  s.start_offset_cycles = r.start_offset_cycles;
+  s.duration_cycles = r.duration_cycles;
+  s.speed_mm_min = r.speed_mm_min;
+  s.rapid = r.rapid;
+  s.user_m = r.user_m;
+  s.user_p = r.user_p;
+  s.user_q = r.user_q;
 }
 
 }  // namespace contour::daemon

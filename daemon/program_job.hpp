@@ -28,6 +28,15 @@ struct SegmentRecord {
   bool flood = false;
   int tool = 0;
   int message_id = -1;
+  // Every field of PlannedSegment crosses: the fractional timing of the look-ahead planner, the
+  // planned speed and the rapid flag, and a user M-code's number and words.
+  double start_offset_cycles = 0.0;
+  double duration_cycles = 0.0;
+  double speed_mm_min = 0.0;
+  bool rapid = false;
+  int user_m = 0;
+  double user_p = -1.0;
+  double user_q = -1.0;
 };
 SegmentRecord to_record(const control::PlannedSegment& s) noexcept;
 void from_record(const SegmentRecord& r, control::PlannedSegment& s) noexcept;
