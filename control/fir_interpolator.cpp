@@ -154,6 +154,14 @@ void Interpolator::drop_finished(std::int64_t t) noexcept {
   }
 }
 
+void Interpolator::set_hold_marker(const PlannedSegment* m) noexcept {
+  last_.hold_kind = m != nullptr ? m->kind : SegmentKind::kMotion;
+  last_.hold_tool = m != nullptr ? m->tool : 0;
+  last_.user_m = m != nullptr ? m->user_m : 0;
+  last_.user_p = m != nullptr ? m->user_p : -1.0;
+  last_.user_q = m != nullptr ? m->user_q : -1.0;
+}
+
 InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexcept {
   if (done_) {
     out = last_;
@@ -172,6 +180,7 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
     head_ = (head_ + 1) % cap_;
     --count_;
     last_.message_id = -1;
+    set_hold_marker(nullptr);
   }
   // Spread override changes over at least t_A (rate limit 1/(L-1) per period).
   const double rate = 1.0 / std::max(1, fir_.length() - 1);
@@ -245,6 +254,7 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
     if (count_ > 0) {
       // The hold marker must now be at the front (motion before it has stopped).
       last_.message_id = at(0).kind == SegmentKind::kMotion ? -1 : at(0).message_id;
+      set_hold_marker(at(0).kind == SegmentKind::kMotion ? nullptr : &at(0));
       if (st == InterpStatus::kSpindleWait && at(0).kind == SegmentKind::kSpindleSync) {
         last_.spindle = at(0).spindle;  // the new speed is commanded while the path waits
         last_.spindle_rpm = at(0).spindle_rpm;

@@ -53,7 +53,12 @@ class FirFilter {
 // kSpindleSync: exact stop, the marker's spindle state is output at once, and the interpolator
 // waits (InterpStatus::kSpindleWait) until resume() — the loop resumes it when the spindle is at
 // speed (LinuxCNC's spindle.N.at-speed before a feed move).
-enum class SegmentKind : std::uint8_t { kMotion, kHold, kOptionalHold, kEnd, kSpindleSync };
+// kToolChange (M6) and kUserMcode (M100..M199) are holds like kHold (exact stop,
+// InterpStatus::kHolding until resume()); InterpOutput::hold_kind tells the loop which, so that
+// the machine logic can run them (a PLC tool changer / M-code sequence) instead of the operator.
+enum class SegmentKind : std::uint8_t {
+  kMotion, kHold, kOptionalHold, kEnd, kSpindleSync, kToolChange, kUserMcode
+};
 
 // One planned micro-block (a line, an arc chord or a part of one at one command speed) with its
 // command start time. Produced by BlendPlanner (non-RT), consumed by Interpolator (RT).
@@ -79,6 +84,9 @@ struct PlannedSegment {
   bool flood = false;
   int tool = 0;
   int message_id = -1;  // holds: index into the planner's message table
+  int user_m = 0;       // kUserMcode: the M number (100..199) and its P and Q words
+  double user_p = -1.0;  // (-1 when absent, as the interpreter and LinuxCNC pass them)
+  double user_q = -1.0;
 };
 
 enum class InterpStatus : std::uint8_t {
@@ -102,6 +110,13 @@ struct InterpOutput {
   bool flood = false;
   int tool = 0;
   int message_id = -1;  // while holding
+  // While holding: the marker's kind (kHold, kOptionalHold, kToolChange with `hold_tool` the
+  // tool to load, kUserMcode with its M number and words); kMotion otherwise.
+  SegmentKind hold_kind = SegmentKind::kMotion;
+  int hold_tool = 0;
+  int user_m = 0;
+  double user_p = -1.0;
+  double user_q = -1.0;
   InterpStatus status = InterpStatus::kIdle;
 };
 
@@ -156,6 +171,7 @@ class Interpolator {
   double ovr_ = 0.0;  // applied override
   bool holding_ = false;
   InterpStatus hold_status_ = InterpStatus::kHolding;  // kHolding or kSpindleWait
+  void set_hold_marker(const PlannedSegment* m) noexcept;
   bool resumed_hold_ = false;
   bool done_ = false;
   InterpOutput last_{};

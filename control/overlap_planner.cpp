@@ -63,11 +63,18 @@ void OverlapPlanner::push(const Block& b) {
       break;
     }
     case BlockKind::kDwell:
-      barrier(SegmentKind::kMotion, "", b, b.dwell_s);
+      if (b.user_m != 0) {
+        // M100..M199: a hold marker the loop hands to the machine logic (or passes at once).
+        barrier(SegmentKind::kUserMcode, "", b, b.dwell_s);
+      } else {
+        barrier(SegmentKind::kMotion, "", b, b.dwell_s);
+      }
       break;
     case BlockKind::kProgramStop:
-    case BlockKind::kToolChange:
       barrier(SegmentKind::kHold, b.message, b, 0.0);
+      break;
+    case BlockKind::kToolChange:
+      barrier(SegmentKind::kToolChange, b.message, b, 0.0);
       break;
     case BlockKind::kOptionalStop:
       barrier(SegmentKind::kOptionalHold, b.message, b, 0.0);
@@ -97,6 +104,9 @@ void OverlapPlanner::barrier(SegmentKind kind, const std::string& msg, const Blo
     s.mist = b.mist;
     s.flood = b.flood;
     s.tool = b.tool;
+    s.user_m = b.user_m;
+    s.user_p = b.user_p;
+    s.user_q = b.user_q;
     if (!msg.empty()) {
       messages_.push_back(msg);
       s.message_id = static_cast<int>(messages_.size()) - 1;

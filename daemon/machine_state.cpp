@@ -38,6 +38,8 @@ std::string_view to_string(FaultCause c) noexcept {
     case FaultCause::kNmtStateChange: return "drive left NMT operational";
     case FaultCause::kStandstillTimeout: return "standstill timeout";
     case FaultCause::kLimitCycle: return "limit cycle";
+    case FaultCause::kPlcEstop: return "machine logic E-stop";
+    case FaultCause::kPlcFault: return "machine logic fault";
     case FaultCause::kInternal: return "internal error";
   }
   return "?";

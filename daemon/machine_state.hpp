@@ -36,6 +36,9 @@ enum class FaultCause : std::uint8_t {
   kNmtStateChange,     // the drive left NMT operational (boot-up, stopped, pre-operational)
   kStandstillTimeout,  // after a stop an axis still moved: the drives got the quick stop
   kLimitCycle,         // command chatter / clamp rate over the limit-cycle watchdog's fault level
+  kPlcEstop,           // the machine logic requested an E-stop (issue 20)
+  kPlcFault,           // the machine logic requested a fault, or its engine latched one (I/O
+                       // stale, M-code / tool-change timeout, scan error)
   kInternal,
 };
 inline constexpr std::size_t kFaultCauseCount = static_cast<std::size_t>(FaultCause::kInternal) + 1;

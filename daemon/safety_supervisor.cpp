@@ -86,6 +86,10 @@ std::string describe(const ResetBlock& b) {
     case FaultCause::kSpindleFault: return "the spindle drive still reports a fault";
     case FaultCause::kBusError: return "the CAN bus is still in error (bus-off / error passive)";
     case FaultCause::kEstopInput: return "the E-stop input is still asserted";
+    case FaultCause::kPlcFault:
+    case FaultCause::kPlcEstop:
+      return "the machine logic still requests an E-stop, a fault or an axis fault, or a latched "
+             "PLC fault's cause remains (contourctl plc status)";
     default: return std::string(to_string(b.cause)) + (who.empty() ? "" : " (" + who + ")");
   }
 }

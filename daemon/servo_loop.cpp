@@ -42,6 +42,21 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
       telemetry_(static_cast<std::size_t>(cfg.telemetry.ring_capacity)) {
   axes_ = static_cast<int>(cfg.machine.axes.size());
   if (axes_ < 1 || axes_ > 3) throw std::invalid_argument("servo loop: 1 to 3 axes");
+  // The PLC engine reads CiA 402 drive inputs (0x60FD) and CiA 401 modules from the loop's
+  // feedback, which no bus maps into its PDOs yet: such a signal would sit at its default
+  // forever. Refused at start-up instead of ignored.
+  if (cfg.plc.present) {
+    for (const auto& sig : cfg.plc.signals) {
+      const auto k = sig.binding.kind;
+      if (k != config::PlcBindingKind::kCia402 && k != config::PlcBindingKind::kCia401) continue;
+      throw std::invalid_argument(
+          sig.where + ": plc signal '" + sig.name + "': " +
+          (k == config::PlcBindingKind::kCia402 ? "cia402 (drive digital I/O 0x60FD/0x60FE)"
+                                                : "cia401 (CAN I/O module)") +
+          " bindings are not mapped by the CANopen master yet: bind the signal to gpio, modbus "
+          "or sim");
+    }
+  }
   period_s_ = cfg.machine.period_s;
   for (std::size_t i = 0; i < 3 && i < cfg.machine.axes.size(); ++i) {
     gain_per_s_[i] = cfg.machine.axes[i].drive.gain_per_s;
@@ -179,6 +194,10 @@ void ServoLoop::detach_job(bool ok) noexcept {
   const double progress = program_.output().path_progress_mm;
   ProgramJob* job = program_.detach(ok);
   if (job == nullptr) return;
+  if (plc_ != nullptr) {  // a sequence of this program still running is abandoned
+    plc_->release_mcode();
+    plc_->release_tool_change();
+  }
   finished_job_ = job->id;
   finished_ok_ = ok;
   finished_cycle_ = cycle_;
@@ -363,9 +382,9 @@ void ServoLoop::refuse_command(CommandKind k) noexcept {
 bool ServoLoop::try_reset() noexcept {
   reset_block_ = supervisor_.reset_block(fb_, io_ != nullptr && io_->estop_tripped());
   // Soft PLC: refused while it still requests E-stop / fault / an axis fault or a latched engine
-  // fault's cause remains (FaultCause has no PLC entry yet: kInternal names it).
+  // fault's cause remains.
   if (!reset_block_ && plc_ != nullptr && !plc_->causes_gone()) {
-    reset_block_ = ResetBlock{FaultCause::kInternal, -1, 0};
+    reset_block_ = ResetBlock{FaultCause::kPlcFault, -1, 0};
   }
   const Transition t = sm_.reset(!reset_block_);
   if (!t.accepted) return false;
@@ -432,21 +451,21 @@ void ServoLoop::logic() noexcept {
   if (rq.estop) {
     if (st != MachineState::kEstop) {
       note(PlcAction::kEstop, -1, 0, PlcFaultKind::kNone);
-      enter_estop(FaultCause::kInternal);
+      enter_estop(FaultCause::kPlcEstop);
     }
   } else if (st != MachineState::kFault && st != MachineState::kEstop) {
     if (plc_out_.fault) {
       note(PlcAction::kEngineFault, plc_out_.fault.index, plc_out_.fault.code, plc_out_.fault.kind);
-      raise_fault(FaultReport{FaultCause::kInternal, plc_out_.fault.index, plc_out_.fault.value,
+      raise_fault(FaultReport{FaultCause::kPlcFault, plc_out_.fault.index, plc_out_.fault.value,
                               plc_out_.fault.limit});
     } else if (rq.fault) {
       note(PlcAction::kFault, -1, rq.fault_code, PlcFaultKind::kNone);
-      raise_fault(FaultReport{FaultCause::kInternal, -1, static_cast<double>(rq.fault_code), 0.0});
+      raise_fault(FaultReport{FaultCause::kPlcFault, -1, static_cast<double>(rq.fault_code), 0.0});
     } else {
       for (int i = 0; i < axes_; ++i) {
         if (!rq.axis_fault[static_cast<std::size_t>(i)]) continue;
         note(PlcAction::kAxisFault, i, 0, PlcFaultKind::kNone);
-        raise_fault(FaultReport{FaultCause::kInternal, i, 1.0, 0.0});
+        raise_fault(FaultReport{FaultCause::kPlcFault, i, 1.0, 0.0});
         break;
       }
     }
@@ -619,7 +638,7 @@ void ServoLoop::program_step(MachineState st, RefPoint& r) noexcept {
   }
   if (s.underrun_end) emit(EventKind::kUnderrunEnd);
   if (s.planner_failed) transition(sm_.apply(Request::kStop), FaultCause::kNone);
-  if (s.program_hold) {  // M0/M1/M6
+  if (s.program_hold && !logic_takes_hold()) {  // M0/M1/M6 for the operator
     const control::InterpOutput& o = program_.output();
     emit(EventKind::kProgramPause, FaultCause::kNone, o.message_id);
     transition(sm_.apply(Request::kHold), FaultCause::kNone);
@@ -639,6 +658,48 @@ void ServoLoop::program_step(MachineState st, RefPoint& r) noexcept {
     detach_job(false);
     transition(sm_.apply(Request::kStopped), FaultCause::kNone);
   }
+}
+
+// Issue 20: M6 and the user M-codes M100..M199 reach the loop as hold markers (the path has
+// stopped exactly). Where the machine logic runs them (plc.tool_change / plc.mcodes), the program
+// stays RUNNING while the PLC's sequence runs: the request goes up with the tool / M number and
+// P, Q; the PLC's done signal resumes the path; no done within the configured timeout is a PLC
+// fault the engine latches (the logic stage then faults the machine). A user M-code no PLC
+// program handles passes at once (an exact stop, as before). True: the hold is taken here.
+bool ServoLoop::logic_takes_hold() noexcept {
+  const control::InterpOutput& o = program_.output();
+  using control::SegmentKind;
+  if (o.hold_kind == SegmentKind::kUserMcode) {
+    if (plc_ == nullptr || !plc_->handles_mcode(o.user_m)) {
+      program_.resume();
+      return true;
+    }
+    switch (plc_->mcode_state()) {
+      case Handshake::kIdle: plc_->start_mcode(o.user_m, o.user_p, o.user_q); break;
+      case Handshake::kDone:
+        plc_->release_mcode();
+        program_.resume();
+        break;
+      case Handshake::kTimedOut: plc_->release_mcode(); break;  // the engine's fault stops us
+      case Handshake::kPending:
+      case Handshake::kWaiting: break;
+    }
+    return true;
+  }
+  if (o.hold_kind == SegmentKind::kToolChange && plc_ != nullptr && plc_->handles_tool_change()) {
+    switch (plc_->tool_change_state()) {
+      case Handshake::kIdle: plc_->start_tool_change(o.hold_tool); break;
+      case Handshake::kDone:
+        plc_->release_tool_change();
+        program_.resume();
+        break;
+      case Handshake::kTimedOut: plc_->release_tool_change(); break;
+      case Handshake::kPending:
+      case Handshake::kWaiting: break;
+    }
+    return true;
+  }
+  return false;
 }
 
 AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool servo,
@@ -860,7 +921,12 @@ void ServoLoop::publish() noexcept {
   pub_.gains_generation = gains_generation_;
   pub_.gains_cycle = gains_cycle_;
   pub_.jogging = jog_.active();
-  pub_.interp_holding = io.status == control::InterpStatus::kHolding;
+  // An M6 / M1xx the machine logic runs is not the operator's pause (status shows the PLC's
+  // handshake under `plc status`).
+  pub_.interp_holding = io.status == control::InterpStatus::kHolding &&
+                        io.hold_kind != control::SegmentKind::kUserMcode &&
+                        !(io.hold_kind == control::SegmentKind::kToolChange && plc_ != nullptr &&
+                          plc_->handles_tool_change());
   pub_.hold_line = pub_.interp_holding ? io.line : 0;
   pub_.hold_tool = pub_.interp_holding ? io.tool : 0;
   pub_.hold_message_id = pub_.interp_holding ? io.message_id : -1;

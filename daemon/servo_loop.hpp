@@ -297,6 +297,7 @@ class ServoLoop {
 
   [[nodiscard]] SourceKind select_source(MachineState st) const noexcept;
   void program_step(MachineState st, RefPoint& r) noexcept;
+  bool logic_takes_hold() noexcept;
   void apply_command(const LoopCommand& c) noexcept;
   void transition(const Transition& t, FaultCause cause) noexcept;
   void raise_fault(const FaultReport& f) noexcept;
