@@ -75,6 +75,7 @@ std::string_view to_string(CommandKind k) noexcept {
     case CommandKind::kRecordFlag: return "record";
     case CommandKind::kSetPosition: return "set-position";
     case CommandKind::kForce: return "force";
+    case CommandKind::kIdentify: return "identify";
   }
   return "?";
 }

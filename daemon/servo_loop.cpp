@@ -1,5 +1,7 @@
 #include "daemon/servo_loop.hpp"
 
+#include "control/system_identification.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -72,6 +74,13 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
   ctrl_.configure(base_params_);
   applied_params_ = staged_params_ = base_params_;
   model_.configure(config::make_model_params(cfg.control));
+  {
+    control::ExcitationParams ep;
+    ep.period_s = period_s_;
+    ident_exc_ = control::make_excitation(ep);
+    ident_v_.assign(ident_exc_.size(), 0.0);
+    ident_x_.assign(ident_exc_.size(), 0.0);
+  }
   {
     const auto& w = cfg.safety.chatter;
     control::ChatterMonitorParams cp;
@@ -360,6 +369,17 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       fb_.act_mm[c.axis] = c.a;
       hold_here();
       break;
+    case CommandKind::kIdentify:
+      if (st != MachineState::kReady || program_.attached() || jog_.active() || c.axis < 0 ||
+          c.axis >= axes_ || ident_state_.load(std::memory_order_relaxed) == IdentifyState::kRunning) {
+        refuse();
+        break;
+      }
+      hold_here();
+      ident_axis_ = c.axis;
+      ident_k_ = 0;
+      ident_state_.store(IdentifyState::kRunning, std::memory_order_relaxed);
+      break;
     case CommandKind::kForce:
       if (!force_.configured()) {
         refuse();
@@ -502,6 +522,7 @@ void ServoLoop::cycle() noexcept {
   const bool servo = st == MachineState::kReady || st == MachineState::kRunning ||
                      st == MachineState::kHold;
   const RefPoint r = reference(st, servo);
+  identify_step(st);
   v_ref_ = (ref_ - ref_prev_) / period_s_;  // control, following error, a stop's start
   double eps_norm = 0.0;
   AxisCommands out = control_step(r, st, servo, v_ref_, eps_norm);
@@ -765,8 +786,61 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
     out.mode = st == MachineState::kEnabling ? DriveMode::kEnabled : DriveMode::kDisabled;
     eps_.setZero();
   }
+  if (servo && ident_state_.load(std::memory_order_relaxed) == IdentifyState::kRunning) {
+    // Identification: the axis under test gets the excitation, open loop; sample k = the
+    // position read and the target written in this cycle (control/system_identification.hpp).
+    const auto a = static_cast<std::size_t>(ident_axis_);
+    v_cmd_[a] = ident_exc_[ident_k_];
+    ident_v_[ident_k_] = v_cmd_[a];
+    ident_x_[ident_k_] = fb_.act_mm[ident_axis_];
+    clamped_[a] = false;
+    if (++ident_k_ == ident_exc_.size()) {
+      ++ident_seq_;
+      ident_state_.store(IdentifyState::kDone, std::memory_order_release);
+    }
+  }
   for (int i = 0; i < axes_; ++i) out.velocity_mm_s[static_cast<std::size_t>(i)] = v_cmd_[static_cast<std::size_t>(i)];
   return out;
+}
+
+// Identification, reference side: the axis under test is not servoed (its reference follows
+// the position it has, so neither the controller nor the following-error rule fights the
+// excitation); the others hold. The experiment ends (aborted) when the machine leaves READY or a
+// program/jog starts; once done the axis holds where it stands.
+void ServoLoop::identify_step(MachineState st) noexcept {
+  const IdentifyState is = ident_state_.load(std::memory_order_relaxed);
+  if (is == IdentifyState::kDone && ident_k_ == ident_exc_.size()) {
+    ident_k_ = 0;  // first cycle after the last sample: hold here (controller restarted)
+    hold_here();
+    return;
+  }
+  if (is != IdentifyState::kRunning) return;
+  if (st != MachineState::kReady || program_.attached() || jog_.active()) {
+    ++ident_seq_;
+    ident_state_.store(IdentifyState::kAborted, std::memory_order_release);
+    hold_here();
+    return;
+  }
+  ref_[ident_axis_] = fb_.act_mm[ident_axis_];
+}
+
+bool ServoLoop::identify_record(int& axis, std::vector<double>& v_cmd_mm_s,
+                                std::vector<double>& position_mm) const {
+  if (ident_state_.load(std::memory_order_acquire) != IdentifyState::kDone) return false;
+  axis = ident_axis_;
+  v_cmd_mm_s = ident_v_;
+  position_mm = ident_x_;
+  return true;
+}
+
+const char* to_string(IdentifyState s) noexcept {
+  switch (s) {
+    case IdentifyState::kIdle: return "idle";
+    case IdentifyState::kRunning: return "running";
+    case IdentifyState::kDone: return "done";
+    case IdentifyState::kAborted: return "aborted";
+  }
+  return "?";
 }
 
 void ServoLoop::channels(MachineState st, AxisCommands& out) noexcept {
@@ -990,6 +1064,12 @@ void ServoLoop::publish() noexcept {
   pub_.plc_requests = plc_req_;
   pub_.plc_engine_fault = plc_engine_fault_;
   pub_.plc_cause = plc_cause_;
+  pub_.identify_state = ident_state_.load(std::memory_order_relaxed);
+  pub_.identify_axis = ident_axis_;
+  pub_.identify_seq = ident_seq_;
+  pub_.identify_samples = ident_state_.load(std::memory_order_relaxed) == IdentifyState::kRunning
+                              ? ident_k_
+                              : ident_exc_.size();
   std::atomic_thread_fence(std::memory_order_release);
   seq_.store(s0 + 2, std::memory_order_release);
 }

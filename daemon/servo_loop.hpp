@@ -64,7 +64,15 @@ enum class CommandKind : std::uint8_t {
   kSetOverride, kRecordFlag,
   kSetPosition,  // axis, a = position mm; DISABLED/READY only (bus.set_position on the RT thread)
   kForce,        // axis: 1 = on, 0 = off, -1 = unchanged; a = reference N (NaN = unchanged)
+  kIdentify,     // axis: play the identification excitation on it (READY, nothing loaded/jogging)
 };
+
+// Drive identification (issue 16, `contourctl identify`): the loop plays a preallocated velocity
+// excitation (control::make_excitation) on one axis at rest while the others hold, and records
+// the target it wrote and the position it read in every cycle. The non-RT side fits the model
+// (control::identify_axis) from identify_record() once the state is kDone.
+enum class IdentifyState : std::uint8_t { kIdle, kRunning, kDone, kAborted };
+[[nodiscard]] const char* to_string(IdentifyState s) noexcept;
 
 // Fixed-size command record (non-RT -> RT).
 struct LoopCommand {
@@ -228,6 +236,11 @@ struct LoopStatus {
   PlcRequests plc_requests{};
   PlcFault plc_engine_fault{};     // the last fault the engine latched (I/O stale, timeout, ...)
   PlcStopCause plc_cause{};        // what the PLC did to the machine last (FAULT/ESTOP/hold)
+  // Drive identification: state, axis, completed (done or aborted) experiments, samples played.
+  IdentifyState identify_state = IdentifyState::kIdle;
+  int identify_axis = -1;
+  std::uint64_t identify_seq = 0;
+  std::size_t identify_samples = 0;
 };
 
 struct LoopOptions {
@@ -267,6 +280,13 @@ class ServoLoop {
   // resume and jog refused, NC.spindle_inhibit -> spindle speed 0. A reset is refused while the
   // PLC still requests (PlcEngine::causes_gone()); an accepted one resets the engine.
   void attach_plc(PlcEngine* plc) noexcept { plc_ = plc; }
+
+  // Drive identification record (non-RT, after status().identify_state == kDone): the targets
+  // written (mm/s) and positions read (mm) of the axis, one per cycle. False unless done.
+  bool identify_record(int& axis, std::vector<double>& v_cmd_mm_s,
+                       std::vector<double>& position_mm) const;
+  // The excitation the loop plays (control::make_excitation with the defaults at the loop period).
+  [[nodiscard]] const std::vector<double>& identify_excitation() const noexcept { return ident_exc_; }
 
   [[nodiscard]] LoopStatus status() const noexcept;
   [[nodiscard]] CycleStats& stats() noexcept { return stats_; }
@@ -397,6 +417,13 @@ class ServoLoop {
   std::uint64_t gains_generation_ = 0, gains_cycle_ = 0;
 
   // Soft PLC (logic stage).
+  // Drive identification (allocated at construction; written by the RT thread only while kRunning).
+  std::vector<double> ident_exc_, ident_v_, ident_x_;
+  std::atomic<IdentifyState> ident_state_{IdentifyState::kIdle};
+  int ident_axis_ = -1;
+  std::size_t ident_k_ = 0;
+  std::uint64_t ident_seq_ = 0;
+  void identify_step(MachineState st) noexcept;
   PlcEngine* plc_ = nullptr;
   PlcCycleOutput plc_out_{};
   PlcRequests plc_req_{};  // this cycle's requests (commands use the previous cycle's)

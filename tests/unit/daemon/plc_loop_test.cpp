@@ -144,6 +144,7 @@ TEST(PlcLoop, OvertravelFaultsTheAxisResetOnlyOnceReleased) {
   r.step(3);
   auto st = r.loop.status();
   EXPECT_EQ(st.state, MachineState::kFault);
+  EXPECT_EQ(st.cause, FaultCause::kPlcFault);  // the machine logic's, not "internal error"
   EXPECT_EQ(st.plc_cause.action, PlcAction::kAxisFault);
   EXPECT_EQ(st.plc_cause.axis, 1);
   EXPECT_TRUE(st.plc_requests.axis_fault[1]);
@@ -153,7 +154,7 @@ TEST(PlcLoop, OvertravelFaultsTheAxisResetOnlyOnceReleased) {
   r.step(300);  // the reset window runs out
   EXPECT_TRUE(refused(r, CommandKind::kReset, mark));
   EXPECT_EQ(r.loop.status().state, MachineState::kFault);
-  EXPECT_EQ(r.loop.status().reset_block.cause, FaultCause::kInternal);
+  EXPECT_EQ(r.loop.status().reset_block.cause, FaultCause::kPlcFault);
 
   ASSERT_EQ(p.plc.unforce("limit_y_pos"), "");
   r.step(3);
@@ -183,6 +184,7 @@ TEST(PlcLoop, EstopRequestAndItsReset) {
   r.step(2);
   EXPECT_EQ(r.loop.status().state, MachineState::kEstop);
   EXPECT_EQ(r.loop.status().plc_cause.action, PlcAction::kEstop);
+  EXPECT_EQ(r.loop.status().cause, FaultCause::kPlcEstop);
   std::size_t mark = r.events.size();
   r.loop.post({CommandKind::kReset});
   r.step(300);
