@@ -30,6 +30,14 @@ def motion_span(p):
     return idx[0], idx[-1] + 1  # p[idx[0]] is the last still sample, p[idx[-1] + 1] the last moved
 
 
+def acc10(p, period_s, n=10):
+    """Cross-check of the meter: per-axis peak of (v[k+n] - v[k]) / (n T), v the 1-period difference."""
+    if len(p) < n + 2:
+        return [0.0, 0.0, 0.0]
+    v = np.diff(p, axis=0) / period_s
+    return (np.abs(v[n:] - v[:-n]).max(axis=0) / (n * period_s)).tolist()
+
+
 def last_json(text):
     for line in reversed(text.strip().splitlines()):
         line = line.strip()
@@ -94,13 +102,13 @@ def programmed_path(path):
     return np.array(pts), np.array(verts) if verts else np.zeros((0, 3))
 
 
-def plot(name, out_png, prog, lc_p, cd_p, period_s, center, title):
+def plot(name, out_png, prog, lc_p, cd_p, period_s, center, title, tol_um):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     ref, verts = programmed_path(prog)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(14, 6))
-    half = 1.5  # mm around the worst vertex
+    half = max(0.2, 6e-3 * tol_um)  # mm around the worst vertex: the tolerance stays visible
     def near(p):
         return np.all(np.abs(p - center) <= half, axis=1) if len(p) else np.zeros(0, bool)
     both = np.vstack([q[near(q)] for q in (lc_p, cd_p, ref) if len(q)] + [center[None, :]])
@@ -113,11 +121,15 @@ def plot(name, out_png, prog, lc_p, cd_p, period_s, center, title):
         p = p.copy()
         p[m == 0] = np.nan  # gaps where the path leaves the window
         return p
-    r = seg(ref)
-    ax1.plot(r[:, a], r[:, b], "k-", lw=1, label="programmed")
     for p, st, lb in ((lc_p, "r.-", "LinuxCNC 2.9"), (cd_p, "b.-", "contourd")):
         q = seg(p)
-        ax1.plot(q[:, a], q[:, b], st, ms=2, lw=0.7, label=lb)
+        ax1.plot(q[:, a], q[:, b], st, ms=2, lw=0.7, label=lb + " (1 ms samples)")
+    # programmed segments whose bounding box meets the window (the axes clip them)
+    lo, hi = np.minimum(ref[:-1], ref[1:]), np.maximum(ref[:-1], ref[1:])
+    hit = np.nonzero(np.all((hi >= center - half) & (lo <= center + half), axis=1))[0]
+    r = np.full((3 * len(hit), 3), np.nan)
+    r[0::3], r[1::3] = ref[hit], ref[hit + 1]
+    ax1.plot(r[:, a], r[:, b], "k--", lw=1, label="programmed", zorder=5)
     ax1.plot([center[a]], [center[b]], "ko", mfc="none", ms=10)
     ax1.set_xlim(center[a] - half, center[a] + half)
     ax1.set_ylim(center[b] - half, center[b] + half)
@@ -190,6 +202,7 @@ def main():
                                "worst_vertex": j.get("worst_vertex")}
             if span:
                 cd_p = cd_p[span[0]:span[1] + 1]
+            row["contourd"]["acc10_check_mm_s2"] = acc10(cd_p, period_s)
         else:
             row["contourd_error"] = (j or {}).get("error", r.stderr.strip()[-300:])
         # LinuxCNC
@@ -215,6 +228,7 @@ def main():
                                        "vertex_err_um": j["max_vertex_error_um"],
                                        "acc10_mm_s2": j["peak_accel_10ms_mm_s2"],
                                        "worst_vertex": j.get("worst_vertex"),
+                                       "acc10_check_mm_s2": acc10(lc_p, period_s),
                                        "start_mm": p[0].tolist()}
                 else:
                     row["linuxcnc_error"] = (j or {}).get("error", r.stderr.strip()[-300:])
@@ -226,7 +240,7 @@ def main():
                 try:
                     plot(name, os.path.join(o.out, "plots", tag + ".png"), prog, lc_p, cd_p, period_s,
                          center, "%s: contourd %.3f s, LinuxCNC %.3f s (ratio %.2f); worst vertex of %s"
-                         % (name, row["contourd"]["time_s"], row["linuxcnc"]["time_s"], row["ratio"], w))
+                         % (name, row["contourd"]["time_s"], row["linuxcnc"]["time_s"], row["ratio"], w), tol)
                 except Exception as ex:  # a plot failing does not lose the figures
                     print("analyse.py: %s: plot failed: %s" % (name, ex), file=sys.stderr)
         rows.append(row)
@@ -295,6 +309,9 @@ def summary(rows, tol, amax, gaps, o):
             win = sum(within(r, k, tol) for r in both)
             ar = [acc_ratio(r, k, amax) for r in both]
             aw = sum(a <= 1.0 + 1e-3 for a in ar)
+            dev = max(abs(x - y) for r in both for x, y in zip(r[k]["acc10_mm_s2"], r[k]["acc10_check_mm_s2"]))
+            lines.append("%s: the meter's 10-ms acceleration and analyse.py's own differences of the "
+                         "samples agree within %.1f mm/s²" % (lab, dev))
             lines.append("%s: within %g µm (path and vertex) %d/%d, worst path error %.1f µm, worst vertex error "
                          "%.1f µm; 10-ms acceleration within the axis limit %d/%d, worst %.2fx the limit"
                          % (lab, tol, win, len(both), pe, ve, aw, len(both), max(ar)))
