@@ -215,6 +215,8 @@ def main():
             sel = sel[breaks[-1] + 1:] if len(breaks) else sel  # the last contiguous run
             p = raw[sel, 1:4]
             span = motion_span(p)
+            if not span:
+                row["linuxcnc_error"] = "reported ok but no motion recorded"
             if span:
                 lc_p = p[span[0]:span[1] + 1]
                 traj = os.path.join(o.out, "linuxcnc_traj", tag + ".xyz")
