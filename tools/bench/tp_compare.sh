@@ -60,9 +60,10 @@ if [ ${#programs[@]} -eq 0 ]; then
   if [ "$quick" = 1 ]; then
     programs=("$gen/star_acute.ngc" "$gen/jitter_chords.ngc" "$gen/native_helix.ngc")
   else
-    # The generated set, then the real CAM files of the corpus whose motion is G0/G1 only (shortest
+    # The generated set, the seed-004 diamond and short-block programs, then the real CAM files of the corpus whose motion is G0/G1 only (shortest
     # first; commercial-cameo.nc is left out: over 3 h of machine time per planner).
-    programs=("$gen"/*.ngc "$root/tests/data/gcode/cam_post.ngc"
+    programs=("$gen"/*.ngc "$root/tests/data/fuzz/gcode_fuzz/diamond.ngc"
+      "$root/tests/data/fuzz/gcode_fuzz/short_blocks.ngc" "$root/tests/data/gcode/cam_post.ngc"
       "$cam/pcb2gcode-example_board_new_default-drill.ngc" "$cam/cncjs-jsdc.gcode"
       "$cam/pcb2gcode-multivibrator-clockwise-outline.ngc" "$cam/pcb2gcode-D1MiniGSR-front.ngc"
       "$cam/pcb2gcode-multivibrator-clockwise-back.ngc" "$cam/camotics-buildbotics.gcode"
