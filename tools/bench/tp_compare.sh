@@ -50,8 +50,16 @@ skip() { echo "tp_compare.sh: SKIP: $*"; exit 77; }
 command -v linuxcnc >/dev/null && command -v halsampler >/dev/null ||
   skip "LinuxCNC is not installed (tools/deps.sh installs linuxcnc-uspace from tools/deps.d/linuxcnc.list)"
 "$py" -c 'import linuxcnc' 2>/dev/null || skip "python3 module linuxcnc missing (linuxcnc-uspace)"
+# Its plotting packages are installed here, not by tools/deps.sh: the benchmark is not part of CI.
+if ! "$py" -c 'import yaml, numpy, matplotlib' 2>/dev/null; then
+  pkgs=$(grep -v '^#' "$(dirname "$0")/tp_compare/deps.list" | tr '\n' ' ')
+  sudo=""; [ "$(id -u)" = 0 ] || sudo="sudo"
+  echo "tp_compare.sh: installing $pkgs"
+  $sudo apt-get install -y --no-install-recommends $pkgs >/dev/null 2>&1 ||
+    { $sudo apt-get update >/dev/null 2>&1 && $sudo apt-get install -y --no-install-recommends $pkgs >/dev/null 2>&1; } || true
+fi
 "$py" -c 'import yaml, numpy, matplotlib' 2>/dev/null ||
-  skip "python3-yaml, python3-numpy or python3-matplotlib missing (tools/deps.d/tpcompare.list)"
+  skip "python3-yaml, python3-numpy or python3-matplotlib missing and not installable (tools/bench/tp_compare/deps.list)"
 [ -x "$sim" ] || { echo "tp_compare.sh: $sim not built (tools/build.sh ci contour-sim)" >&2; exit 1; }
 
 if [ ${#programs[@]} -eq 0 ]; then
