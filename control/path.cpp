@@ -85,27 +85,47 @@ double distance_point_polyline(const Eigen::Vector3d& p,
 }
 
 double distance_to_segment(const Eigen::Vector3d& p, const PathSegment& s) noexcept {
-  if (s.kind == PathSegment::Kind::kLine) return distance_point_segment(p, s.start, s.end);
+  double u = 0.0;
+  return closest_on_segment(p, s, u);
+}
+
+double closest_on_segment(const Eigen::Vector3d& p, const PathSegment& s, double& u) noexcept {
+  if (s.kind == PathSegment::Kind::kLine) {
+    const Eigen::Vector3d d = s.end - s.start;
+    const double l2 = d.squaredNorm();
+    u = l2 > 0.0 ? std::clamp((p - s.start).dot(d) / l2, 0.0, 1.0) : 0.0;
+    return (p - (s.start + u * d)).norm();
+  }
   const PlaneAxes ax = plane_axes(s.plane);
   const double r = arc_radius_mm(s);
   const double sweep = arc_sweep_rad(s);
   const double h = s.end[ax.n] - s.start[ax.n];
   const double sign = s.ccw ? 1.0 : -1.0;
   const double a0 = angle_of(s.start, s, ax);
-  double best = std::min((p - s.start).norm(), (p - s.end).norm());
+  const double d_start = (p - s.start).norm(), d_end = (p - s.end).norm();
+  double best = std::min(d_start, d_end);
+  u = d_start <= d_end ? 0.0 : 1.0;
   if (std::abs(h) < 1e-12) {
     // Planar: the closest point is the radial projection if its angle lies in the swept range.
     const double dx = p[ax.a] - s.center[ax.a];
     const double dy = p[ax.b] - s.center[ax.b];
     const double rho = std::hypot(dx, dy);
     const double dn = p[ax.n] - s.start[ax.n];
-    if (sweep >= kTwoPi - 1e-12 || rho < 1e-15) {
-      return std::hypot(rho - r, dn);
-    }
-    double rel = sign * (std::atan2(dy, dx) - a0);
+    double rel = rho < 1e-15 ? 0.0 : sign * (std::atan2(dy, dx) - a0);
     rel = std::fmod(rel, kTwoPi);
     if (rel < 0.0) rel += kTwoPi;
-    if (rel <= sweep) best = std::min(best, std::hypot(rho - r, dn));
+    if (sweep >= kTwoPi - 1e-12 || rho < 1e-15) {
+      // One turn or more: the radial projection on the first turn.
+      u = rel / sweep;
+      return std::hypot(rho - r, dn);
+    }
+    if (rel <= sweep) {
+      const double dr = std::hypot(rho - r, dn);
+      if (dr < best) {
+        best = dr;
+        u = rel / sweep;
+      }
+    }
     return best;
   }
   // Helix: g(phi) = |p - h(phi)|^2 / 2 over the swept angle. Near the helix (rho >= r / 2) every
@@ -121,6 +141,7 @@ double distance_to_segment(const Eigen::Vector3d& p, const PathSegment& s) noexc
     return q;
   };
   const double kz = h / sweep;
+  double best_phi = u * sweep;
   auto newton = [&](double phi) {
     for (int it = 0; it < 30; ++it) {
       const double a = a0 + sign * phi;
@@ -139,7 +160,12 @@ double distance_to_segment(const Eigen::Vector3d& p, const PathSegment& s) noexc
       if (std::abs(next - phi) < 1e-14) break;
       phi = next;
     }
-    return (p - pos(phi)).norm();
+    const double d = (p - pos(phi)).norm();
+    if (d < best) {
+      best = d;
+      best_phi = phi;
+    }
+    return d;
   };
   const double rho = std::hypot(p[ax.a] - s.center[ax.a], p[ax.b] - s.center[ax.b]);
   if (rho >= 0.5 * r) {
@@ -148,24 +174,31 @@ double distance_to_segment(const Eigen::Vector3d& p, const PathSegment& s) noexc
     if (rel < 0.0) rel += kTwoPi;
     for (double phi = rel - kTwoPi; phi <= sweep + kTwoPi; phi += kTwoPi) {
       if (phi < -0.5 * kTwoPi || phi > sweep + 0.5 * kTwoPi) continue;
-      best = std::min(best, newton(std::clamp(phi, 0.0, sweep)));
+      newton(std::clamp(phi, 0.0, sweep));
     }
-    best = std::min(best, newton(0.0));
-    best = std::min(best, newton(sweep));
+    newton(0.0);
+    newton(sweep);
+    u = best_phi / sweep;
     return best;
   }
   const int n = std::max(16, static_cast<int>(std::ceil(sweep / kTwoPi * 64.0)));
-  double best_phi = 0.0;
-  double best_d = best;
+  double scan_phi = best_phi;
+  double scan_d = best;
   for (int i = 0; i <= n; ++i) {
     const double phi = sweep * i / n;
     const double d = (p - pos(phi)).norm();
-    if (d < best_d) {
-      best_d = d;
-      best_phi = phi;
+    if (d < scan_d) {
+      scan_d = d;
+      scan_phi = phi;
     }
   }
-  return std::min(best_d, newton(best_phi));
+  if (scan_d < best) {
+    best = scan_d;
+    best_phi = scan_phi;
+  }
+  newton(scan_phi);
+  u = best_phi / sweep;
+  return best;
 }
 
 double distance_to_path(const Eigen::Vector3d& p, std::span<const PathSegment> path) noexcept {

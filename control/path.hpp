@@ -58,6 +58,9 @@ double segment_length_mm(const PathSegment& s) noexcept;
 Eigen::Vector3d point_at(const PathSegment& s, double u) noexcept;
 
 double distance_to_segment(const Eigen::Vector3d& p, const PathSegment& s) noexcept;
+// The same distance, and in u the fraction in [0, 1] (of the line, or of the arc's swept angle)
+// of a point of s at that distance (the closest point; on a planar full circle, on its first turn).
+double closest_on_segment(const Eigen::Vector3d& p, const PathSegment& s, double& u) noexcept;
 double distance_to_path(const Eigen::Vector3d& p, std::span<const PathSegment> path) noexcept;
 
 // Distance from a point to the straight segment [a, b] (b == a allowed).

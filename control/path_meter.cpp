@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 
@@ -104,6 +105,24 @@ void PathMeter::window() {
   w1_ = std::max(w1_, std::min(segs_.size(), cursor_ + 3));
 }
 
+double PathMeter::progress_mm(const Vector3d& x, const PathSegment& s, double ref_mm) {
+  const double len = segment_length_mm(s);
+  if (s.kind == PathSegment::Kind::kLine) return (x - s.start).dot(s.end - s.start) / len;
+  const PlaneAxes ax = plane_axes(s.plane);
+  const double r = arc_radius_mm(s);
+  const double dx = x[ax.a] - s.center[ax.a], dy = x[ax.b] - s.center[ax.b];
+  if (std::hypot(dx, dy) < 0.5 * r) return std::numeric_limits<double>::quiet_NaN();
+  const double sweep = arc_sweep_rad(s);
+  const double a0 = std::atan2(s.start[ax.b] - s.center[ax.b], s.start[ax.a] - s.center[ax.a]);
+  constexpr double kTwoPi = 2.0 * std::numbers::pi;
+  double rel = (s.ccw ? 1.0 : -1.0) * (std::atan2(dy, dx) - a0);
+  rel = std::fmod(rel, kTwoPi);
+  if (rel < 0.0) rel += kTwoPi;
+  const double ref = ref_mm / len * sweep;
+  const double phi = rel + kTwoPi * std::round((ref - rel) / kTwoPi);
+  return phi / sweep * len;
+}
+
 void PathMeter::add_sample(const Vector3d& p) {
   const std::int64_t n = r_.samples++;
   // Kinematics.
@@ -138,9 +157,19 @@ void PathMeter::add_sample(const Vector3d& p) {
   // segments behind it stay in the window for the error.
   std::size_t arg = cursor_;
   {
+    // Has the tool left the cursor's segment (past its end, or back along it)?
+    std::size_t from = cursor_;
+    const Seg& cs = segs_[cursor_];
+    const double pr = progress_mm(p, cs.seg, cursor_progress_mm_);
+    if (std::isfinite(pr)) {
+      if ((pr < cursor_progress_mm_ - slack_ || pr > cs.s1 - cs.s0 + slack_) && cursor_ + 1 < w1_)
+        from = cursor_ + 1;
+      else
+        cursor_progress_mm_ = std::max(cursor_progress_mm_, std::min(pr, cs.s1 - cs.s0));
+    }
     double dmin = 1e300;
-    for (std::size_t i = cursor_; i < w1_; ++i) dmin = std::min(dmin, distance_to_segment(p, segs_[i].seg));
-    for (std::size_t i = cursor_; i < w1_; ++i) {
+    for (std::size_t i = from; i < w1_; ++i) dmin = std::min(dmin, distance_to_segment(p, segs_[i].seg));
+    for (std::size_t i = from; i < w1_; ++i) {
       if (distance_to_segment(p, segs_[i].seg) <= dmin + slack_) {
         arg = i;
         break;
@@ -149,6 +178,8 @@ void PathMeter::add_sample(const Vector3d& p) {
   }
   if (arg != cursor_) {
     cursor_ = arg;
+    cursor_progress_mm_ = std::max(0.0, progress_mm(p, segs_[cursor_].seg, 0.0));
+    if (!std::isfinite(cursor_progress_mm_)) cursor_progress_mm_ = 0.0;
     window();
   }
   const double dp = dist(p, nullptr);
@@ -165,13 +196,17 @@ void PathMeter::add_sample(const Vector3d& p) {
     return;
   }
   // Branch and bound on the output chord [prev, p]. Bound of min_k d_k on an interval: for a
-  // line segment d_k is convex along the chord (<= the larger end value), for an arc it is only
-  // 1-Lipschitz ((d_a + d_b + l) / 2). Intervals that cannot beat the maximum by more than
+  // line segment d_k is convex along the chord (<= the larger end value); for an arc (helix
+  // too), with u_a, u_b the swept fractions of the closest points at the ends, every point of the
+  // interval is within max(d_a, d_b) + r dphi^2 / 8 of the arc point at the interpolated angle
+  // (dphi = |u_b - u_a| sweep); it is also 1-Lipschitz ((d_a + d_b + l) / 2) and, planar, the
+  // radial bound of arc_bound(). Intervals that cannot beat the maximum by more than
   // max(1 nm, 1e-4 of it) are dropped.
   const Vector3d a = prev_;
   const std::size_t nw = w1_ - w0_;
   const double len = (p - a).norm();
   pool_.clear();
+  upool_.clear();
   tpar_.clear();
   double m = 0.0;
   Vector3d where = p;
@@ -181,8 +216,10 @@ void PathMeter::add_sample(const Vector3d& p) {
     tpar_.push_back(t);
     double best = 1e300;
     for (std::size_t i = w0_; i < w1_; ++i) {
-      const double d = distance_to_segment(x, segs_[i].seg);
+      double u = 0.0;
+      const double d = closest_on_segment(x, segs_[i].seg, u);
       pool_.push_back(d);
+      upool_.push_back(u);
       best = std::min(best, d);
     }
     if (best > m) {
@@ -200,7 +237,13 @@ void PathMeter::add_sample(const Vector3d& p) {
       if (sg.kind == PathSegment::Kind::kLine) {
         ub = std::min(ub, std::max(d0, d1));
       } else if (std::min(d0, d1) < ub) {
-        ub = std::min(ub, arc_bound(sg, a + tpar_[i0] * (p - a), a + tpar_[i1] * (p - a), d0, d1, l));
+        // Along the chord, the arc point at the interpolated angle: the chord of the arc between
+        // the two closest points deviates from the arc by at most r dphi^2 / 8 (|h''| = r).
+        const double dphi = std::abs(upool_[i1 * nw + k] - upool_[i0 * nw + k]) * arc_sweep_rad(sg);
+        const double r = arc_radius_mm(sg);
+        ub = std::min(ub, std::max(d0, d1) + r * dphi * dphi / 8.0);
+        if (std::min(d0, d1) < ub)
+          ub = std::min(ub, arc_bound(sg, a + tpar_[i0] * (p - a), a + tpar_[i1] * (p - a), d0, d1, l));
       }
     }
     return ub;

@@ -16,7 +16,9 @@
 //    over that time), and per period; peak speed.
 // "Near": the segments within `reach_mm` of path length around the segment nearest to the
 // previous sample (the cursor), so a path that passes the same place twice (stacked circles,
-// pockets) is measured against the pass that is being run, not a later one.
+// pockets) is measured against the pass that is being run, not a later one. The cursor leaves its
+// segment once the tool has run past its end, or back along it, by more than the cursor slack (a
+// path that retraces itself: a Z retract and the plunge down the same line, a second lap).
 #include <Eigen/Core>
 #include <cstdint>
 #include <deque>
@@ -73,6 +75,10 @@ class PathMeter {
     bool vdone = false;
   };
   double dist(const Eigen::Vector3d& x, std::size_t* arg) const;
+  // Path length along segment `s` of the point of it nearest to x, unclamped (< 0 before its
+  // start, > its length past its end); arcs: the angle unwrapped to the turn nearest `ref_mm`.
+  // NaN when x is too near an arc's axis to tell.
+  static double progress_mm(const Eigen::Vector3d& x, const PathSegment& s, double ref_mm);
   void window();
 
   double T_, reach_;
@@ -80,13 +86,14 @@ class PathMeter {
   int avg_;
   std::deque<Seg> segs_;
   std::size_t cursor_ = 0;   // index in segs_
+  double cursor_progress_mm_ = 0.0;  // furthest progress along the cursor's segment
   std::size_t w0_ = 0, w1_ = 0;  // window [w0, w1)
   double s_total_ = 0.0;
   bool have_prev_ = false;
   Eigen::Vector3d prev_ = Eigen::Vector3d::Zero();
   std::deque<Eigen::Vector3d> hist_;  // last avg + 2 samples (accelerations)
   std::int64_t first_move_ = -1, last_move_ = -1;
-  std::vector<double> pool_, tpar_;  // branch and bound work buffers
+  std::vector<double> pool_, upool_, tpar_;  // branch and bound work buffers
   double last_err_ = 0.0;
   int last_line_ = 0;
   PathMeterResult r_;

@@ -22,6 +22,7 @@
 #include "control/blend_planner.hpp"
 #include "control/fir_interpolator.hpp"
 #include "control/gcode.hpp"
+#include "control/gcode_machine.hpp"
 #include "control/path.hpp"
 #include "control/path_meter.hpp"
 #include "tools/contour-sim/commands.hpp"
@@ -49,6 +50,8 @@ struct Options {
   std::size_t max_corners = 2000;
   double reach_mm = 0.0;
   double lookahead_mm = 0.0;
+  std::string var_file, tbl_file;            // LinuxCNC .var / .tbl (mm), as contour-gcode-diff
+  std::vector<std::string> subroutine_dirs;  // added to program.subroutine_path
 };
 
 struct CornerAcc {
@@ -91,7 +94,30 @@ Machine load_machine(const Options& o) {
       m.amax[static_cast<int>(i)] = cfg.machine.axes[i].max_accel_mm_s2;
     }
   }
+  for (const auto& d : o.subroutine_dirs) m.pcfg.subroutine_path.push_back(d);
   return m;
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw std::runtime_error(path + ": cannot open");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+// The parser's set-up: the config's program section, then --var/--tbl (the machine
+// contour-gcode-diff runs both interpreters on) and --subroutines.
+control::ProgramSetup program_setup(const Options& o, const Machine& mc) {
+  control::ProgramSetup setup = config::to_program_setup(mc.pcfg, mc.icfg);
+  if (!o.var_file.empty() || !o.tbl_file.empty()) {
+    control::MachineContext machine;
+    if (!o.var_file.empty())
+      control::apply_var_file(machine, control::parse_var_file(read_text(o.var_file), o.var_file));
+    if (!o.tbl_file.empty()) machine.tools = control::parse_tool_table(read_text(o.tbl_file), o.tbl_file);
+    setup.machine = machine;
+  }
+  return setup;
 }
 
 // Path length the meter looks around its cursor: the path the FIR's window spans at the highest
@@ -117,7 +143,7 @@ nlohmann::json corner_json(const CornerAcc& c, double period_s) {
 Result run(const Options& o, BlendMethod method, bool floor_rounding, std::ofstream* csv,
            std::vector<Vector3d>* path_out, std::vector<Vector3d>* vertices_out) {
   const Machine mc = load_machine(o);
-  control::ProgramSetup setup = config::to_program_setup(mc.pcfg, mc.icfg);
+  control::ProgramSetup setup = program_setup(o, mc);
   const double period_s = mc.period_s;
   control::PlannerParams pp;
   pp.period_s = period_s;
@@ -299,7 +325,7 @@ nlohmann::json summary(const Result& r) {
 // lines that do not start with a number are skipped), against the program's path.
 int run_measure(const Options& o) {
   const Machine mc = load_machine(o);
-  control::ProgramSetup setup = config::to_program_setup(mc.pcfg, mc.icfg);
+  control::ProgramSetup setup = program_setup(o, mc);
   control::GcodeParser parser(setup, o.program);
   std::ifstream in(o.program);
   if (!in) throw std::runtime_error(o.program + ": cannot open");
@@ -367,6 +393,9 @@ int run_blend(int argc, char** argv) {
                  "measure this trajectory (one 'x y z ...' row per period, e.g. LinuxCNC's "
                  "commanded position) against the program instead of planning it");
   app.add_option("--reach-mm", o.reach_mm, "path length the meter searches around its cursor (0: auto)");
+  app.add_option("--var", o.var_file, "LinuxCNC parameter file (mm) the program starts from");
+  app.add_option("--tbl", o.tbl_file, "LinuxCNC tool table (mm)");
+  app.add_option("--subroutines", o.subroutine_dirs, "subroutine directory (o<name> call), repeatable");
   app.add_option("--lookahead-mm", o.lookahead_mm, "look-ahead planner: path held ahead (0: auto)");
   try {
     app.parse(argc, argv);
