@@ -33,7 +33,7 @@ struct ProgramText {
   // MDI (issue 18): blocks already interpreted by the daemon's MDI interpreter; when `mdi` is
   // true, path/text are ignored and these blocks (the last one a kEnd) are the program.
   bool mdi = false;
-  std::vector<control::Block> blocks;
+  std::vector<control::Block> blocks{};
 };
 
 class ProgramError : public std::runtime_error {
