@@ -78,6 +78,14 @@ ProgramConfig parse_program(Section& s) {
   c.arc_tolerance_inch = s.number("arc_tolerance_inch", c.arc_tolerance_inch, 4e-8, 0.04);
   c.subroutine_path = subroutine_dirs(s);
   c.require_program_end = s.boolean("require_program_end", c.require_program_end);
+  c.var_file = s.string("var_file", "");
+  if (s.has("var_file") && c.var_file.empty()) s.error("var_file", "must be a file name");
+  c.tool_table = s.string("tool_table", "");
+  if (s.has("tool_table") && c.tool_table.empty()) s.error("tool_table", "must be a file name");
+  if (!c.tool_table.empty() && !c.tools.empty()) {
+    s.error("tools", "give the tool table either here or in tool_table (the .tbl file is the tool "
+                     "table, as in LinuxCNC), not both");
+  }
   s.finish();
   return c;
 }

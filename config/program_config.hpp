@@ -16,6 +16,13 @@
 //                                                     absolute paths of existing directories
 //   require_program_end: false                        true: a program without M2/M30/'%' is
 //                                                     refused at its end (LinuxCNC's rule)
+//   var_file: state/machine.var                       LinuxCNC parameter file the daemon loads
+//                                                     and rewrites atomically (offsets, G92,
+//                                                     G28/G30); relative to the config file,
+//                                                     ${VAR:-default} expanded; absent: no
+//                                                     persistence (today's behaviour)
+//   tool_table: sim.tbl                               LinuxCNC tool table (must exist); it is the
+//                                                     tool table, so `tools` is refused with it
 #include <array>
 #include <functional>
 #include <optional>
@@ -39,6 +46,8 @@ struct ProgramConfig {
   double arc_tolerance_inch = 0.0028284271247461905;
   std::vector<std::string> subroutine_path;
   bool require_program_end = false;
+  std::string var_file;    // as written in the YAML ("" = none)
+  std::string tool_table;  // as written in the YAML ("" = none)
 };
 
 ProgramConfig parse_program(Section& s);

@@ -169,6 +169,47 @@ std::vector<CommandSpec> build_table() {
        "handshakes, latched faults, requests to the NC",
        {}, kAnyState, false, false, "any",
        "{present, cycle, scan_us, programs, devices, mcode, tool_change, faults, requests, cause}"});
+  {
+    // Issue 18: offsets, tool table, touch-off and MDI (daemon/commands_offsets.cpp).
+    const auto coord = [](double lo, double hi, const char* ax) {
+      return number(ax, false, lo, hi, "new value (mm) of this axis");
+    };
+    add({CommandId::kOffsets, "offsets",
+         "get the work offsets G54..G59.3, G92, G28/G30 (mm, machine coordinates), or set one "
+         "axis or more of one of them (persisted to program.var_file)",
+         {typed("set", ArgType::kChoice, false, "one of G54..G59.3, G92, G28, G30",
+                "the offset to change", "G54|G55|G56|G57|G58|G59|G59.1|G59.2|G59.3|G92|G28|G30"),
+          coord(-1e5, 1e5, "X"), coord(-1e5, 1e5, "Y"), coord(-1e5, 1e5, "Z")},
+         kAnyState, false, false, "get: any; set: not while a program runs",
+         "{offsets: {active, G54..G59.3, G92, G92_applied, G28, G30}, var_file}"});
+    add({CommandId::kTools, "tools",
+         "get the tool table, or set (add) / remove a tool: length_mm, diameter_mm, pocket, "
+         "comment (persisted to program.tool_table)",
+         {number("set", false, 1, 99999, "tool number to set or add"),
+          number("remove", false, 1, 99999, "tool number to remove"),
+          number("length_mm", false, -1000, 1000, "tool length offset (Z)"),
+          number("diameter_mm", false, 0, 1000, "diameter"),
+          number("pocket", false, 0, 99999, "pocket"),
+          typed("comment", ArgType::kString, false, "a string", "comment")},
+         kAnyState, false, false, "get: any; set/remove: not while a program runs",
+         "{tools: [{number, pocket, length_mm, diameter_mm, comment}], tool_table, tool}"});
+    add({CommandId::kTouchOff, "touch-off",
+         "set a work offset so that the axis' commanded position reads `value` in that system "
+         "(G10 L20: G92 and the tool length offset accounted)",
+         {typed("axis", ArgType::kAxis, true, "an axis name or index", "axis name or index"),
+          number("value", true, -1e5, 1e5, "the position the axis shall read (mm)"),
+          typed("offset", ArgType::kChoice, false, "one of G54..G59.3",
+                "coordinate system (default: the active one)",
+                "G54|G55|G56|G57|G58|G59|G59.1|G59.2|G59.3")},
+         bits({S::kDisabled, S::kReady}), false, false, "DISABLED or READY, no program loaded",
+         "{offset, axis, value, offsets}"});
+    add({CommandId::kMdi, "mdi",
+         "run one command line (or a few, separated by newlines) now, through the program path; "
+         "modal state carries from one mdi to the next",
+         {typed("text", ArgType::kString, true, "a string of G-code", "the G-code line(s)")},
+         bits({S::kReady}), false, false, "READY, no program loaded, not jogging (where `run` is)",
+         "{job, state, blocks}"});
+  }
   add({CommandId::kShutdown, "shutdown", "controlled stop, drives disabled, exit 0", {}, kAnyState,
        false, false, "any", "{shutting_down}"});
   return t;

@@ -180,6 +180,7 @@ json Daemon::status_json() {
                       {"rms_contour_error_um", rs.rms_contour_error_um()}};
     }
   }
+  add_machine_status(j, st);
   if (st.fault_axis >= 0 || st.cause != FaultCause::kNone) {
     j["fault"] = {{"cause", to_string(st.cause)}, {"axis", st.fault_axis},
                   {"value", st.fault_value}, {"limit", st.fault_limit}};
@@ -758,6 +759,10 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kSimGpio: return cmd_sim_gpio(req);
     case CommandId::kIo: return cmd_io(req);
     case CommandId::kPlcStatus: return cmd_plc_status(req);
+    case CommandId::kOffsets: return cmd_offsets(req);
+    case CommandId::kTools: return cmd_tools(req);
+    case CommandId::kTouchOff: return cmd_touch_off(req);
+    case CommandId::kMdi: return cmd_mdi(req);
     case CommandId::kShutdown:
       spdlog::info("shutdown requested by socket client pid {} uid {}", client.pid, client.uid);
       request_shutdown();

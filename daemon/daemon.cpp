@@ -222,6 +222,7 @@ void Daemon::start_components() {
   });
   logger_->start();
   planner_ = std::make_unique<ProgramPlanner>(cfg_);
+  planner_->set_machine_data(machine_data_.get());
 
   RtSetupRequest req;
   req.priority = cfg_.loop.priority;
@@ -556,6 +557,7 @@ int Daemon::run() {
   }
   try {
     check_paths();
+    open_machine_data();
     // The configured gains against the loop this machine runs (daemon/gains_check.hpp): a set
     // that would oscillate is a configuration error, before any drive is enabled.
     {

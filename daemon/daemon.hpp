@@ -36,6 +36,7 @@
 #include "daemon/config_reload.hpp"
 #include "daemon/event_log.hpp"
 #include "daemon/io_channels.hpp"
+#include "daemon/machine_data.hpp"
 #include "daemon/planner.hpp"
 #include "daemon/rt_timing.hpp"
 #include "daemon/servo_loop.hpp"
@@ -118,6 +119,17 @@ class Daemon {
   nlohmann::json plc_brief_json(const LoopStatus& st);       // commands_plc.cpp: status.plc
   nlohmann::json force_json();
   nlohmann::json gpio_json();
+  // Issue 18 (daemon/commands_offsets.cpp): program.var_file / tool_table loaded (throws
+  // StartupConfigError naming file:line), the socket commands and the status fields.
+  void open_machine_data();
+  nlohmann::json cmd_offsets(const nlohmann::json& req);
+  nlohmann::json cmd_tools(const nlohmann::json& req);
+  nlohmann::json cmd_touch_off(const nlohmann::json& req);
+  nlohmann::json cmd_mdi(const nlohmann::json& req);
+  void add_machine_status(nlohmann::json& j, const LoopStatus& st) const;
+  std::unique_ptr<MachineData> machine_data_;
+  std::unique_ptr<control::GcodeParser> mdi_parser_;  // command thread only
+  std::uint64_t mdi_generation_ = 0;
 
   config::Config cfg_;
   DaemonOptions opt_;

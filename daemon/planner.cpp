@@ -41,7 +41,18 @@ control::PlannerParams planner_params(const config::Config& cfg) {
 
 }  // namespace
 
-ProgramPlanner::ProgramPlanner(const config::Config& cfg) : cfg_(cfg) {}
+ProgramPlanner::ProgramPlanner(const config::Config& cfg) : cfg_(cfg) {
+  if (!cfg.program.var_file.empty() || !cfg.program.tool_table.empty()) {
+    try {
+      own_machine_ = std::make_unique<MachineData>(
+          cfg.program, resolve_config_path(cfg.source, cfg.program.var_file),
+          resolve_config_path(cfg.source, cfg.program.tool_table));
+    } catch (const MachineDataError& e) {
+      throw ProgramError(e.what());
+    }
+    machine_ = own_machine_.get();
+  }
+}
 
 ProgramPlanner::~ProgramPlanner() { abort_and_join(); }
 
@@ -81,13 +92,40 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src,
   const config::Config cfg = config_snapshot();
   control::ProgramSetup setup = config::to_program_setup(cfg.program, cfg.interpolator);
   setup.start_mm = start_mm;
+  if (machine_ != nullptr) setup.machine = machine_->snapshot();
+  std::vector<Eigen::Vector3d> pts;
+  ProgramSummary sum;
+  const double chord = cfg.interpolator.tolerance_um * 1e-3 * cfg.interpolator.arc_chord_fraction;
+  auto check = [&](const control::Block& b) {
+    if (b.kind != control::BlockKind::kMotion) return;
+    ++sum.motion_blocks;
+    pts.clear();
+    control::chord_points(b.seg, std::max(chord, 1e-4), pts);
+    Eigen::Vector3d prev = b.seg.start;
+    for (const auto& p : pts) {
+      sum.length_mm += (p - prev).norm();
+      prev = p;
+      for (std::size_t i = 0; i < cfg.machine.axes.size() && i < 3; ++i) {
+        const auto& ax = cfg.machine.axes[i];
+        const double x = p[static_cast<Eigen::Index>(i)];
+        if (x < ax.min_mm - 1e-9 || x > ax.max_mm + 1e-9) {
+          std::ostringstream m;
+          m << src.name << ':' << b.line << ":1: soft limit: " << ax.name << " would reach "
+            << x << " mm, outside [" << ax.min_mm << ", " << ax.max_mm << "] mm";
+          throw ProgramError(m.str());
+        }
+      }
+    }
+  };
+  if (src.mdi) {
+    sum.lines = 1;
+    for (const auto& b : src.blocks) check(b);
+    return sum;
+  }
   auto in = open_source(src);
   control::GcodeParser parser(setup, src.name);
   std::vector<control::Block> blocks;
-  std::vector<Eigen::Vector3d> pts;
   std::string text;
-  ProgramSummary sum;
-  const double chord = cfg.interpolator.tolerance_um * 1e-3 * cfg.interpolator.arc_chord_fraction;
   try {
     while (!parser.ended()) {
       if (std::getline(*in, text)) {
@@ -96,27 +134,7 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src,
       } else {
         parser.finish(blocks);
       }
-      for (const auto& b : blocks) {
-        if (b.kind != control::BlockKind::kMotion) continue;
-        ++sum.motion_blocks;
-        pts.clear();
-        control::chord_points(b.seg, std::max(chord, 1e-4), pts);
-        Eigen::Vector3d prev = b.seg.start;
-        for (const auto& p : pts) {
-          sum.length_mm += (p - prev).norm();
-          prev = p;
-          for (std::size_t i = 0; i < cfg.machine.axes.size() && i < 3; ++i) {
-            const auto& ax = cfg.machine.axes[i];
-            const double x = p[static_cast<Eigen::Index>(i)];
-            if (x < ax.min_mm - 1e-9 || x > ax.max_mm + 1e-9) {
-              std::ostringstream m;
-              m << src.name << ':' << b.line << ":1: soft limit: " << ax.name << " would reach "
-                << x << " mm, outside [" << ax.min_mm << ", " << ax.max_mm << "] mm";
-              throw ProgramError(m.str());
-            }
-          }
-        }
-      }
+      for (const auto& b : blocks) check(b);
       blocks.clear();
     }
   } catch (const control::GcodeError& e) {
@@ -192,16 +210,33 @@ bool ProgramPlanner::wait_prefill(const ProgramJob& job, double timeout_s) {
 void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
                           Eigen::Vector3d start_mm, SegmentSink sink) {
   const config::Config cfg = config_snapshot();
+  std::unique_ptr<control::GcodeParser> parser;
+  // What the program changed (G10, G92, G28.1, M6 ...) is the machine's from now on, also when
+  // planning fails or the program is stopped: the interpreter has executed those lines.
+  auto commit_machine = [&]() {
+    if (!commit_ || machine_ == nullptr || parser == nullptr || !parser->machine_changed()) return;
+    try {
+      machine_->commit(parser->machine(), parser->modal_state().tool_offset_mm);
+    } catch (const std::exception& e) {
+      std::lock_guard lk(mu_);
+      if (error_.empty()) error_ = e.what();
+    }
+  };
   try {
     control::ProgramSetup setup = config::to_program_setup(cfg.program, cfg.interpolator);
     setup.start_mm = start_mm;
-    auto in = open_source(src);
-    control::GcodeParser parser(setup, src.name);
+    if (machine_ != nullptr) setup.machine = machine_->snapshot();
+    std::unique_ptr<std::istream> in;
+    if (!src.mdi) {
+      in = open_source(src);
+      parser = std::make_unique<control::GcodeParser>(setup, src.name);
+    }
     control::BlendPlanner planner(planner_params(cfg), start_mm);
     std::vector<control::Block> blocks;
     std::string text;
     control::PlannedSegment seg;
     std::size_t n_messages = 0;  // planner messages copied into messages_
+    bool mdi_pushed = false;
     auto aborted = [&] { return job->abort.load(std::memory_order_acquire); };
     while (!aborted()) {
       if (planner.messages().size() > n_messages) {
@@ -222,22 +257,33 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
         }
         // Wait for room: the queue's push() would count a full ring as a drop.
         while (job->queue.size() >= job->queue.capacity()) {
-          if (aborted()) return;
+          if (aborted()) {
+            commit_machine();
+            return;
+          }
           std::this_thread::sleep_for(std::chrono::milliseconds(2));
         }
         job->queue.push(to_record(seg));
       }
       if (planner.ended()) break;
+      if (src.mdi) {
+        if (mdi_pushed) break;
+        for (const auto& b : src.blocks) planner.push(b);  // ends with a kEnd block (the daemon's)
+        mdi_pushed = true;
+        continue;
+      }
       if (std::getline(*in, text)) {
-        parser.parse_line(text, blocks);
+        parser->parse_line(text, blocks);
       } else {
-        parser.finish(blocks);
+        parser->finish(blocks);
       }
       for (const auto& b : blocks) planner.push(b);
       blocks.clear();
     }
+    commit_machine();
     job->planner_done.store(true, std::memory_order_release);
   } catch (const std::exception& e) {
+    commit_machine();
     {
       std::lock_guard lk(mu_);
       error_ = e.what();

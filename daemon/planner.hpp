@@ -19,6 +19,8 @@
 
 #include "config/config.hpp"
 #include "control/fir_interpolator.hpp"
+#include "control/gcode.hpp"
+#include "daemon/machine_data.hpp"
 #include "daemon/servo_loop.hpp"
 
 namespace contour::daemon {
@@ -28,6 +30,10 @@ struct ProgramText {
   std::string name;  // file name for messages ("<inline>" for text)
   std::string path;  // read from this file when non-empty
   std::string text;  // else this inline program
+  // MDI (issue 18): blocks already interpreted by the daemon's MDI interpreter; when `mdi` is
+  // true, path/text are ignored and these blocks (the last one a kEnd) are the program.
+  bool mdi = false;
+  std::vector<control::Block> blocks{};
 };
 
 class ProgramError : public std::runtime_error {
@@ -82,11 +88,24 @@ class ProgramPlanner {
   void set_live(const config::Config& live);
   [[nodiscard]] config::Config config_snapshot() const;
 
+  // Issue 18: programs start from this machine context (offsets, tools) and, when their
+  // interpreter reports machine_changed(), commit what it left when planning ends, fails or is
+  // aborted (a stopped program). Null: ProgramSetup from the config alone. Set before start().
+  // Without it (offline runs), a config with program.var_file / tool_table is read (cfg.source
+  // locates relative paths) and used read-only: nothing is written.
+  void set_machine_data(MachineData* md) {
+    machine_ = md;
+    commit_ = md != nullptr;
+  }
+
  private:
   void plan(std::shared_ptr<ProgramJob> job, ProgramText src, Eigen::Vector3d start_mm,
             SegmentSink sink);
 
   config::Config cfg_;
+  std::unique_ptr<MachineData> own_machine_;  // read-only copy for offline runs
+  MachineData* machine_ = nullptr;
+  bool commit_ = false;
   std::thread thread_;
   std::shared_ptr<ProgramJob> job_;
   mutable std::mutex mu_;

@@ -12,6 +12,7 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
+#include <cctype>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -571,6 +572,23 @@ int main(int argc, char** argv) {
   std::vector<std::string> io_args, plc_args;
   auto* io = app.add_subcommand("io", "soft PLC I/O image | io force NAME VALUE | io unforce NAME|all");
   io->add_option("ARGS", io_args);
+  // Offsets, tools, touch-off, MDI (issue 18).
+  std::vector<std::string> offsets_args, tools_args;
+  std::string touch_axis, touch_offset, mdi_text;
+  double touch_value = 0.0;
+  auto* offsets = app.add_subcommand(
+      "offsets", "offsets | offsets set G54..G59.3|G92|G28|G30 X=V [Y=V] [Z=V] (mm)");
+  offsets->add_option("ARGS", offsets_args);
+  auto* tools = app.add_subcommand(
+      "tools", "tools | tools set N [length=MM] [diameter=MM] [pocket=P] [comment=TEXT] | tools remove N");
+  tools->add_option("ARGS", tools_args);
+  auto* touch = app.add_subcommand(
+      "touch-off", "touch-off AXIS VALUE [--offset G54]: the axis' position reads VALUE there");
+  touch->add_option("AXIS", touch_axis)->required();
+  touch->add_option("VALUE", touch_value)->required();
+  touch->add_option("--offset", touch_offset, "G54..G59.3 (default: the active system)");
+  auto* mdi = app.add_subcommand("mdi", "mdi \"G0 X10 Y5\": run G-code line(s) now (READY)");
+  mdi->add_option("TEXT", mdi_text)->required();
   auto* plc = app.add_subcommand("plc", "plc status: PLC programs' scan times, couplers, handshakes, faults");
   plc->add_option("ARGS", plc_args)->required();
   auto* circle = app.add_subcommand(
@@ -740,6 +758,81 @@ int main(int argc, char** argv) {
       else
         std::cout << "io: " << r.value("name", std::string()) << " "
                   << (r.value("forced", false) ? "forced to " + r["value"].dump() : "unforced") << '\n';
+      return kExitOk;
+    } else if (cmd == "offsets" || cmd == "tools") {
+      const auto& a = cmd == "offsets" ? offsets_args : tools_args;
+      const std::string usage =
+          cmd == "offsets" ? "contourctl: offsets | offsets set G54..G59.3|G92|G28|G30 X=V [Y=V] [Z=V]\n"
+                           : "contourctl: tools | tools set N [length=MM] [diameter=MM] [pocket=P] "
+                             "[comment=TEXT] | tools remove N\n";
+      auto number_of = [](const std::string& v) {
+        std::size_t used = 0;
+        const double d = std::stod(v, &used);
+        if (used != v.size()) throw std::invalid_argument(v);
+        return d;
+      };
+      try {
+        if (!a.empty()) {
+          if (a[0] != "set" && !(cmd == "tools" && a[0] == "remove")) throw std::invalid_argument(a[0]);
+          if (a.size() < 2) throw std::invalid_argument("missing argument");
+          if (cmd == "offsets") {
+            req["set"] = a[1];
+          } else {
+            req[a[0]] = number_of(a[1]);
+          }
+          for (std::size_t i = 2; i < a.size(); ++i) {
+            const auto eq = a[i].find('=');
+            if (eq == std::string::npos || a[0] == "remove") throw std::invalid_argument(a[i]);
+            std::string k = a[i].substr(0, eq);
+            const std::string v = a[i].substr(eq + 1);
+            if (cmd == "offsets") {
+              for (auto& ch : k) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
+              req[k] = number_of(v);
+            } else if (k == "comment") {
+              req[k] = v;
+            } else if (k == "length" || k == "diameter") {
+              req[k + "_mm"] = number_of(v);
+            } else {
+              req[k] = number_of(v);
+            }
+          }
+        }
+      } catch (const std::exception&) {
+        std::cerr << usage;
+        return kExitUsage;
+      }
+      const json r = c.call(req);
+      if (as_json) {
+        print(r, true);
+      } else if (cmd == "offsets") {
+        const json& o = r["offsets"];
+        std::cout << "active: " << o.value("active", std::string()) << '\n';
+        for (const char* k : {"G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3", "G92", "G28", "G30"})
+          std::cout << k << ": " << o[k].dump() << '\n';
+        std::cout << "G92 applied: " << (o.value("G92_applied", false) ? "yes" : "no") << '\n';
+      } else {
+        std::cout << "tool in spindle: " << r.value("tool", 0) << '\n';
+        for (const auto& t : r["tools"]) {
+          std::printf("T%-3d P%-3d length %.4f mm  diameter %.4f mm  %s\n", t["number"].get<int>(),
+                      t["pocket"].get<int>(), t["length_mm"].get<double>(),
+                      t["diameter_mm"].get<double>(), t["comment"].get<std::string>().c_str());
+        }
+      }
+      return kExitOk;
+    } else if (cmd == "touch-off") {
+      req["axis"] = touch_axis;
+      req["value"] = touch_value;
+      if (!touch_offset.empty()) req["offset"] = touch_offset;
+      const json r = c.call(req);
+      if (as_json)
+        print(r, true);
+      else
+        std::cout << "touch-off: " << r["axis"].get<std::string>() << " reads " << r["value"].get<double>()
+                  << " mm in " << r["offset"].get<std::string>() << '\n';
+      return kExitOk;
+    } else if (cmd == "mdi") {
+      req["text"] = mdi_text;
+      print(c.call(req), as_json);
       return kExitOk;
     } else if (cmd == "plc") {
       if (plc_args.size() != 1 || plc_args[0] != "status") {
