@@ -210,6 +210,16 @@ std::vector<CommandSpec> build_table() {
          bits({S::kReady}), false, false, "READY, no program loaded, not jogging (where `run` is)",
          "{job, state, blocks}"});
   }
+  add({CommandId::kIdentify, "identify",
+       "commissioning: play a small velocity excitation on one axis at rest (~0.84 s, +-5 mm/s, "
+       "at most 0.5 mm each way, net zero; the others hold) and fit its drive: gain, time "
+       "constant, transport delay in cycles, compared with machine.axes[].drive",
+       {typed("axis", ArgType::kAxis, true, "an axis name or index", "axis name or index")},
+       bits({S::kReady}), true, false, "READY, no program loaded, not jogging",
+       "{axis, gain_per_s, velocity_gain, tau_ms, delay_cycles, delay_confidence, "
+       "rms_residual_um, excursion_mm, configured: {gain_per_s, tau_ms, delay_cycles}, "
+       "delay_matches, gain_deviation_percent, tau_deviation_percent, verdict, record: "
+       "{period_s, v_cmd_mm_s, position_mm}}"});
   add({CommandId::kShutdown, "shutdown", "controlled stop, drives disabled, exit 0", {}, kAnyState,
        false, false, "any", "{shutting_down}"});
   return t;

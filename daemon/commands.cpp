@@ -12,6 +12,7 @@
 
 #include "daemon/command_table.hpp"
 #include "daemon/commands.hpp"
+#include "daemon/identify.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/gains_check.hpp"
 
@@ -763,6 +764,9 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kTools: return cmd_tools(req);
     case CommandId::kTouchOff: return cmd_touch_off(req);
     case CommandId::kMdi: return cmd_mdi(req);
+    case CommandId::kIdentify:
+      return identify_on_loop(*loop_, cfg_, axis_index(req.at("axis"), cfg_.machine),
+                              [this] { return safety_request_waiting(); });
     case CommandId::kShutdown:
       spdlog::info("shutdown requested by socket client pid {} uid {}", client.pid, client.uid);
       request_shutdown();

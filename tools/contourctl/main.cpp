@@ -587,6 +587,12 @@ int main(int argc, char** argv) {
   touch->add_option("AXIS", touch_axis)->required();
   touch->add_option("VALUE", touch_value)->required();
   touch->add_option("--offset", touch_offset, "G54..G59.3 (default: the active system)");
+  std::string ident_axis;
+  auto* ident = app.add_subcommand(
+      "identify", "identify AXIS [--plot F.png]: measure the axis' drive (gain, time constant, "
+                  "delay) with a small move at rest (READY)");
+  ident->add_option("AXIS", ident_axis)->required();
+  ident->add_option("--plot", plot_png, "plot the experiment (position and velocity target) to this PNG");
   auto* mdi = app.add_subcommand("mdi", "mdi \"G0 X10 Y5\": run G-code line(s) now (READY)");
   mdi->add_option("TEXT", mdi_text)->required();
   auto* plc = app.add_subcommand("plc", "plc status: PLC programs' scan times, couplers, handshakes, faults");
@@ -829,6 +835,26 @@ int main(int argc, char** argv) {
       else
         std::cout << "touch-off: " << r["axis"].get<std::string>() << " reads " << r["value"].get<double>()
                   << " mm in " << r["offset"].get<std::string>() << '\n';
+      return kExitOk;
+    } else if (cmd == "identify") {
+      req["axis"] = ident_axis;
+      json r = c.call(req);
+      if (!plot_png.empty()) {
+        PlotOptions ipo;
+        ipo.title = plot_title;
+        std::cerr << "plot: " << plot_identify(r, plot_png, ipo) << " -> " << plot_png << '\n';
+      }
+      if (as_json) {
+        print(r, true);
+      } else {
+        std::printf("%s: K %.3f 1/s (velocity gain %.4f), tau %.3f ms, delay %d cycles (confidence %.2f); "
+                    "configured K %.3f, tau %.3f ms, delay %d: %s\n",
+                    r["axis"].get<std::string>().c_str(), r["gain_per_s"].get<double>(),
+                    r["velocity_gain"].get<double>(), r["tau_ms"].get<double>(),
+                    r["delay_cycles"].get<int>(), r["delay_confidence"].get<double>(),
+                    r["configured"]["gain_per_s"].get<double>(), r["configured"]["tau_ms"].get<double>(),
+                    r["configured"]["delay_cycles"].get<int>(), r["verdict"].get<std::string>().c_str());
+      }
       return kExitOk;
     } else if (cmd == "mdi") {
       req["text"] = mdi_text;

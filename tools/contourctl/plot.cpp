@@ -466,4 +466,39 @@ std::string plot_timing(const json& status, const std::string& png, const PlotOp
   return "loop timing summary (" + sub.str() + ")";
 }
 
+std::string plot_identify(const json& r, const std::string& png, const PlotOptions& o) {
+  const json rec = r.value("record", json::object());
+  if (!rec.contains("v_cmd_mm_s") || !rec.contains("position_mm") || !rec["v_cmd_mm_s"].is_array() ||
+      !rec["position_mm"].is_array() || rec["v_cmd_mm_s"].size() != rec["position_mm"].size() ||
+      rec["position_mm"].empty()) {
+    throw std::runtime_error("identify reply: record.v_cmd_mm_s / record.position_mm missing or of different length");
+  }
+  const double T = rec.value("period_s", 0.001);
+  const auto& v = rec["v_cmd_mm_s"];
+  const auto& x = rec["position_mm"];
+  const double x0 = x[0].get<double>();
+  gp::TempData data(png);
+  for (std::size_t k = 0; k < x.size(); ++k) {
+    data.out() << static_cast<double>(k) * T << ' ' << (x[k].get<double>() - x0) * 1e3 << ' '
+               << v[k].get<double>() << '\n';
+  }
+  data.close();
+  std::ostringstream sub;
+  sub << "axis " << r.value("axis", std::string("?")) << ": K " << r.value("gain_per_s", 0.0)
+      << " 1/s, tau " << r.value("tau_ms", 0.0) << " ms, delay " << r.value("delay_cycles", 0)
+      << " cycles (configured " << r["configured"].value("gain_per_s", 0.0) << " / "
+      << r["configured"].value("tau_ms", 0.0) << " / " << r["configured"].value("delay_cycles", 0)
+      << ")";
+  std::string script = gp::png_preamble(png, 1200, 700);
+  script += title_line(o, "Drive identification\\n" + sub.str()) +
+            "set xlabel 'time (s)'\nset ylabel 'position from start ({/Symbol m}m)'\n"
+            "set y2label 'velocity target (mm/s)'\nset ytics nomirror\nset y2tics\n"
+            "plot " + gp::quote(data.path()) +
+            " using 1:2 with lines lw 2 lc rgb '#1f77b4' title 'position read', " +
+            gp::quote(data.path()) +
+            " using 1:3 axes x1y2 with steps lc rgb '#d62728' title 'velocity target written'\n";
+  gp::run(script, png);
+  return "drive identification (" + sub.str() + ")";
+}
+
 }  // namespace contour::ctl

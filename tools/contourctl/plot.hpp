@@ -52,4 +52,8 @@ std::string plot_csv(PlotKind kind, const std::vector<TelemetryCsv>& runs, const
 // summary figures (mean / p99 / max lateness, last / max compute time).
 std::string plot_timing(const nlohmann::json& status, const std::string& png, const PlotOptions& o);
 
+// Drive identification (`identify` reply): the recorded position (um from the start) and the
+// velocity target (mm/s) over time, the fitted model in the title.
+std::string plot_identify(const nlohmann::json& reply, const std::string& png, const PlotOptions& o);
+
 }  // namespace contour::ctl
