@@ -35,8 +35,12 @@ function(contour_add_gtests)
     target_include_directories(${tgt} PRIVATE ${PROJECT_SOURCE_DIR})
     target_compile_definitions(${tgt} PRIVATE CONTOUR_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
                                CONTOUR_BINARY_DIR="${PROJECT_BINARY_DIR}")
+    # STATE_DIRECTORY: config/sim.yaml keeps its .var there (default /tmp): tests read a
+    # directory of the build tree instead, never offsets a developer's daemon left in /tmp.
+    file(MAKE_DIRECTORY ${PROJECT_BINARY_DIR}/test-state)
     gtest_discover_tests(${tgt} DISCOVERY_MODE PRE_TEST
                          PROPERTIES LABELS ${A_LABEL} TIMEOUT ${A_TIMEOUT}
+                                    ENVIRONMENT STATE_DIRECTORY=${PROJECT_BINARY_DIR}/test-state
                          WORKING_DIRECTORY ${PROJECT_SOURCE_DIR})
   endforeach()
 endfunction()

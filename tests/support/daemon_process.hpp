@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -81,7 +82,17 @@ class DaemonProcess {
     posix_spawn_file_actions_init(&fa);
     posix_spawn_file_actions_addopen(&fa, 2, log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
-    const int rc = posix_spawn(&pid_, contourd_binary().c_str(), &fa, nullptr, argv.data(), environ);
+    // The daemon's state directory (program.var_file of config/sim.yaml: ${STATE_DIRECTORY}) is
+    // this test's own directory: no test sees offsets another test or a developer left behind.
+    std::vector<std::string> env_s;
+    for (char** e = environ; *e != nullptr; ++e) {
+      if (std::string_view(*e).rfind("STATE_DIRECTORY=", 0) != 0) env_s.emplace_back(*e);
+    }
+    env_s.push_back("STATE_DIRECTORY=" + dir_.string());
+    std::vector<char*> envp;
+    for (auto& e : env_s) envp.push_back(e.data());
+    envp.push_back(nullptr);
+    const int rc = posix_spawn(&pid_, contourd_binary().c_str(), &fa, nullptr, argv.data(), envp.data());
     posix_spawn_file_actions_destroy(&fa);
     EXPECT_EQ(rc, 0) << "cannot start " << contourd_binary();
     if (rc != 0) {

@@ -372,8 +372,11 @@ int run_blend(int argc, char** argv) {
   Options o;
   app.add_option("--program", o.program, "RS274/NGC part program")->required();
   app.add_option("--tolerance-um", o.tolerance_um, "blend tolerance (overrides G64 P), um");
-  app.add_option("--fir-ms", o.fir_ms, "FIR acc/dec time t_A, ms (t_A/T + 1 taps)");
-  app.add_option("--fir2-ms", o.fir2_ms, "second FIR stage (jerk limit), ms; 0 = off");
+  app.add_option("--fir-ms", o.fir_ms,
+                 "FIR acc/dec time t_A, ms (t_A/T + 1 taps); default: interpolator.fir_ms of --config, "
+                 "else 100");
+  app.add_option("--fir2-ms", o.fir2_ms,
+                 "second FIR stage (jerk limit), ms; 0 = off; default: interpolator.fir2_ms of --config");
   app.add_option("--mode", o.mode, "g61 | g64 | limited (overrides the program); default: as programmed")
       ->check(CLI::IsMember({"g61", "g64", "limited"}));
   app.add_option("--method", o.method,
@@ -402,6 +405,17 @@ int run_blend(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : 2;
+  }
+  // The FIR times of --config (interpolator.fir_ms / fir2_ms, what contourd runs) unless given
+  // on the command line; without --config the seed-004 default of 100 ms.
+  if (!o.config.empty() && (app.count("--fir-ms") == 0 || app.count("--fir2-ms") == 0)) {
+    try {
+      const Machine mc = load_machine(o);
+      if (app.count("--fir-ms") == 0) o.fir_ms = mc.icfg.fir_ms;
+      if (app.count("--fir2-ms") == 0) o.fir2_ms = mc.icfg.fir2_ms;
+    } catch (const std::exception&) {
+      // reported with file and line by the run below
+    }
   }
   if (!o.measure.empty()) {
     try {
