@@ -11,6 +11,7 @@
 #include <string>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/run_cmd.hpp"
 
 namespace {
 
@@ -20,14 +21,7 @@ namespace fs = std::filesystem;
 const std::string kSrc = CONTOUR_SOURCE_DIR;
 const std::string kCtl = std::string(CONTOUR_BINARY_DIR) + "/tools/contourctl";
 
-int run_cmd(const std::string& cmd, std::string* out) {
-  FILE* f = ::popen((cmd + " 2>&1").c_str(), "r");
-  if (f == nullptr) return -1;
-  char buf[512];
-  while (std::fgets(buf, sizeof buf, f) != nullptr) *out += buf;
-  const int st = ::pclose(f);
-  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
+using contour::test::run_cmd;
 
 TEST(IdentifyDaemon, ContourctlIdentifyRecoversTheSimulatedDrive) {
   contour::test::DaemonProcess d("identify", {kSrc + "/config/sim.yaml", {}, 1000, 500});

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/run_cmd.hpp"
 
 namespace {
 
@@ -90,15 +91,7 @@ json wait_fresh(const std::string& sock, P pred, int max_polls = 1000) {
   return st;
 }
 
-// The exit status and output of a shell command.
-int run_cmd(const std::string& cmd, std::string* out) {
-  FILE* f = ::popen((cmd + " 2>&1").c_str(), "r");
-  if (f == nullptr) return -1;
-  char buf[512];
-  while (std::fgets(buf, sizeof buf, f) != nullptr) *out += buf;
-  const int st = ::pclose(f);
-  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
+using contour::test::run_cmd;
 
 // sim.yaml with extra `socket:` keys, in the test's own directory.
 std::string sim_config_with_socket(const std::string& tag, const std::string& keys) {

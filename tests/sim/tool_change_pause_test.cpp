@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/run_cmd.hpp"
 
 namespace {
 
@@ -25,14 +26,7 @@ const std::string kCtl = std::string(CONTOUR_BINARY_DIR) + "/tools/contourctl";
 const std::string kProgram =
     "%\n(CAM-style header)\nG21 G90 G17\nT1 M6\nS3000 M3\nG0 X5 Y5\nG1 X20 F1500\nG1 Y15\nM5\nM2\n%\n";
 
-int run_cmd(const std::string& cmd, std::string* out) {
-  FILE* f = ::popen((cmd + " 2>&1").c_str(), "r");
-  if (f == nullptr) return -1;
-  char buf[512];
-  while (std::fgets(buf, sizeof buf, f) != nullptr) *out += buf;
-  const int st = ::pclose(f);
-  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
+using contour::test::run_cmd;
 
 TEST(ToolChangePause, RunStartsAProgramThatBeginsWithAToolChangeAndResumeCompletesIt) {
   contour::test::DaemonProcess d("toolchange", {kSrc + "/config/sim.yaml", {}, 1000, 500});
