@@ -24,11 +24,13 @@ const std::string kSrc = CONTOUR_SOURCE_DIR;
 std::string make_config(const fs::path& dir) {
   fs::create_directories(dir);
   std::string y = contour::test::slurp(kSrc + "/config/sim.yaml");
-  const std::string tbl = "tool_table: sim.tbl";
+  const std::string tbl =
+      "  tools:\n    - {number: 1, length_mm: 0}\n    - {number: 2, length_mm: 12.5}\n"
+      "    - {number: 3, length_mm: 25}\n    - {number: 4, length_mm: 40}\n";
   const std::string var = "var_file: ${STATE_DIRECTORY:-/tmp}/contourd-sim.var";
   EXPECT_NE(y.find(tbl), std::string::npos);
   EXPECT_NE(y.find(var), std::string::npos);
-  y.replace(y.find(tbl), tbl.size(), "tool_table: tools.tbl");
+  y.replace(y.find(tbl), tbl.size(), "  tool_table: tools.tbl\n");
   y.replace(y.find(var), var.size(), "var_file: state/machine.var");
   fs::copy_file(kSrc + "/config/sim.tbl", dir / "tools.tbl", fs::copy_options::overwrite_existing);
   std::ofstream(dir / "machine.yaml") << y;
