@@ -1,5 +1,8 @@
 #include "config/machine_config.hpp"
 
+#include <cmath>
+#include <sstream>
+
 namespace contour::config {
 
 MachineConfig parse_machine(Section& s, double period_s) {
@@ -42,12 +45,58 @@ MachineConfig parse_machine(Section& s, double period_s) {
         static_cast<int>(d.integer("delay_cycles", 1, 0, control::FeedDrive::kMaxDelay));
     ax.drive.period_s = m.period_s;
     d.finish();
+    Section idf = a.child("identified");
+    if (idf.present()) {
+      ax.identified.present = true;
+      ax.identified.gain_per_s = idf.required_number("gain_per_s", 1e-3, 1e5);
+      ax.identified.tau_s = idf.required_number("tau_ms", 0.0, 10000.0) / 1000.0;
+      ax.identified.delay_cycles = static_cast<int>(
+          idf.required_integer("delay_cycles", 0, control::FeedDrive::kMaxDelay));
+      ax.identified.date = idf.string("date", "");
+    }
+    idf.finish();
     for (const auto& other : m.axes) {
       if (other.name == ax.name) a.error("name", "axis " + ax.name + " is defined twice");
     }
     m.axes.push_back(ax);
   }
   return m;
+}
+
+std::vector<std::string> identification_warnings(const MachineConfig& m) {
+  std::vector<std::string> out;
+  for (std::size_t i = 0; i < m.axes.size(); ++i) {
+    const AxisConfig& a = m.axes[i];
+    if (!a.identified.present) continue;
+    const std::string where = "machine.axes[" + std::to_string(i) + "] (" + a.name + ")";
+    const std::string when = a.identified.date.empty() ? "" : " on " + a.identified.date;
+    if (a.identified.delay_cycles != a.drive.delay_cycles) {
+      out.push_back(where + ": the drive's transport delay was measured as " +
+                    std::to_string(a.identified.delay_cycles) + " cycles" + when +
+                    ", but sim.delay_cycles is " + std::to_string(a.drive.delay_cycles) +
+                    ": the Smith predictor assumes the configured delay (identify the axis again "
+                    "or correct delay_cycles; control/CHATTER.md)");
+    }
+    const double k_dev = a.identified.gain_per_s / a.drive.gain_per_s - 1.0;
+    if (std::abs(k_dev) > 0.05) {
+      std::ostringstream o;
+      o << where << ": the drive's gain was measured as " << a.identified.gain_per_s << " 1/s" << when
+        << ", sim.gain_per_s is " << a.drive.gain_per_s << " (" << (k_dev > 0 ? "+" : "")
+        << std::lround(k_dev * 100.0) << " %)";
+      out.push_back(o.str());
+    }
+    if (a.drive.tau_s > 0.0) {
+      const double t_dev = a.identified.tau_s / a.drive.tau_s - 1.0;
+      if (std::abs(t_dev) > 0.10) {
+        std::ostringstream o;
+        o << where << ": the drive's time constant was measured as " << a.identified.tau_s * 1e3
+          << " ms" << when << ", sim.tau_ms is " << a.drive.tau_s * 1e3 << " ("
+          << (t_dev > 0 ? "+" : "") << std::lround(t_dev * 100.0) << " %)";
+        out.push_back(o.str());
+      }
+    }
+  }
+  return out;
 }
 
 }  // namespace contour::config

@@ -119,7 +119,7 @@ std::vector<CommandSpec> build_table() {
        "checked, swapped at a cycle boundary in any state (bumpless)",
        {typed("set", ArgType::kAny, false, "a non-empty object of gains", "gains to change (the handler checks names and ranges)"),
         typed("op", ArgType::kAny, false, "", "ignored (accepted for older clients)")},
-       kAnyState, false, false, "any", "the active gains and their generation"});
+       kAnyState, false, false, "any", "the active gains, their generation and the drive models measured by identify since start (identified)"});
   add({CommandId::kOverride, "override", "feed override in percent",
        {number("percent", true, 0.0, kInf, "0 .. interpolator.feed_override_max_percent",
                Bound::kOverridePercent)},

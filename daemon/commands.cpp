@@ -6,6 +6,7 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <filesystem>
 #include <limits>
 #include <thread>
@@ -446,7 +447,11 @@ json Daemon::cmd_gains(const json& req) {
                 {"kp", kp}, {"ki_per_s", ki}, {"kd_s", kd}, {"ff", ff},
                 {"coupling", p.coupling.enable}, {"cp", p.coupling.cp},
                 {"ci_per_s", p.coupling.ci_per_s}, {"cd_s", p.coupling.cd_s},
-                {"generation", st.gains_generation}, {"active_since_cycle", st.gains_cycle}};
+                {"generation", st.gains_generation}, {"active_since_cycle", st.gains_cycle},
+                {"identified", [this] {
+                   std::lock_guard lk(identified_mu_);
+                   return identified_;
+                 }()}};
   };
   if (!req.contains("set")) return params_json();
   const json& set = req["set"];
@@ -764,9 +769,22 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kTools: return cmd_tools(req);
     case CommandId::kTouchOff: return cmd_touch_off(req);
     case CommandId::kMdi: return cmd_mdi(req);
-    case CommandId::kIdentify:
-      return identify_on_loop(*loop_, cfg_, axis_index(req.at("axis"), cfg_.machine),
-                              [this] { return safety_request_waiting(); });
+    case CommandId::kIdentify: {
+      json r = identify_on_loop(*loop_, cfg_, axis_index(req.at("axis"), cfg_.machine),
+                                [this] { return safety_request_waiting(); });
+      // Kept for `gains save` (the `gains` reply's "identified"): the model as measured.
+      const std::time_t now = std::time(nullptr);
+      std::tm tm{};
+      ::gmtime_r(&now, &tm);
+      char date[32];
+      std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%SZ", &tm);
+      std::lock_guard lk(identified_mu_);
+      identified_[r.at("axis").get<std::string>()] = {{"gain_per_s", r.at("gain_per_s")},
+                                                      {"tau_ms", r.at("tau_ms")},
+                                                      {"delay_cycles", r.at("delay_cycles")},
+                                                      {"date", date}};
+      return r;
+    }
     case CommandId::kShutdown:
       spdlog::info("shutdown requested by socket client pid {} uid {}", client.pid, client.uid);
       request_shutdown();

@@ -231,6 +231,8 @@ void Daemon::start_components() {
   req.require_realtime = cfg_.loop.require_realtime;
   if (req.priority == 0) req.require_realtime = false;
   rt_report_ = rt_.start(req, [this] { loop_->run(rt_stop_); });
+  config_warnings_ = config::identification_warnings(cfg_.machine);
+  for (const auto& w : config_warnings_) spdlog::warn("config: {}", w);
   for (const auto& w : rt_report_.warnings) {
     spdlog::warn("REAL-TIME NOT AVAILABLE: {} (the loop runs, but its timing is not guaranteed; "
                  "set loop.require_realtime: true to refuse)", w);
@@ -333,6 +335,7 @@ nlohmann::json Daemon::reload_json() const {
   nlohmann::json pending = nlohmann::json::array();
   for (const auto& [k, v] : pending_restart_) pending.push_back(k);
   return {{"file", opt_.config_path},
+          {"warnings", config_warnings_},
           {"reloads", reloads_.load()},
           {"reloads_rejected", reloads_rejected_.load()},
           {"pending_restart", pending},

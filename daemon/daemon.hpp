@@ -158,6 +158,13 @@ class Daemon {
   ReloadReport last_reload_;
   mutable std::mutex reload_mu_;  // pending_restart_, last_reload_ (main thread vs status)
   nlohmann::json reload_json() const;
+  // Start-up warnings about the configuration (issue 16: a measured drive model, machine.axes[].
+  // identified, that contradicts the one the controller uses); status.config.warnings.
+  std::vector<std::string> config_warnings_;
+  // The last `identify` result per axis name since start (gain_per_s, tau_ms, delay_cycles, date):
+  // the `gains` reply carries them as "identified", and `contourctl gains save` stores them.
+  mutable std::mutex identified_mu_;
+  nlohmann::json identified_ = nlohmann::json::object();
   std::atomic<bool> components_ready_{false};  // loop_/server_ published (bus event thread reads)
 
   std::mutex jobs_mu_;  // command thread vs logger thread

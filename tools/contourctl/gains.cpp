@@ -366,6 +366,62 @@ void set_in_mapping(YamlText& y, std::size_t map_line,
   }
 }
 
+// Line of the `index`-th item of the block list machine.axes, the end of its lines and the
+// indent of its keys. Fails (file:line) on a flow list or a list the edit cannot follow.
+struct ListItem {
+  std::size_t line = 0;
+  std::size_t end = 0;  // one past its last non-blank line
+  int key_indent = 0;
+};
+
+ListItem axis_item(const YamlText& y, std::size_t index) {
+  const std::size_t m = y.find_key("machine", 0, 0, y.size());
+  if (m == std::string::npos) throw std::runtime_error(y.name() + ": no machine: section");
+  const Block mb = y.block_of(m);
+  if (mb.child_indent < 0) y.fail(m, "'machine' is not a block mapping: edit it by hand");
+  const std::size_t al = y.find_key("axes", mb.child_indent, mb.begin, mb.end);
+  if (al == std::string::npos) y.fail(m, "no machine.axes list");
+  if (!y.value_of(al).empty()) y.fail(al, "'axes' is a flow list: write it as a block to save a drive model");
+  const Block ab = y.block_of(al);
+  std::vector<std::size_t> items;
+  for (std::size_t i = ab.begin; i < ab.end; ++i) {
+    if (blank_or_comment(y.line(i)) || indent_of(y.line(i)) != ab.child_indent) continue;
+    if (y.line(i).compare(static_cast<std::size_t>(ab.child_indent), 2, "- ") != 0) {
+      y.fail(i, "expected a list item ('- ') under machine.axes");
+    }
+    items.push_back(i);
+  }
+  if (index >= items.size()) y.fail(al, "machine.axes has no item " + std::to_string(index));
+  ListItem it;
+  it.line = items[index];
+  const std::size_t next = index + 1 < items.size() ? items[index + 1] : ab.end;
+  it.end = it.line + 1;
+  for (std::size_t i = it.line + 1; i < next; ++i) {
+    if (!blank_or_comment(y.line(i))) it.end = i + 1;
+  }
+  const std::string& l = y.line(it.line);
+  it.key_indent = static_cast<int>(l.find_first_not_of(' ', static_cast<std::size_t>(ab.child_indent) + 1));
+  return it;
+}
+
+// Sets `key: {kvs}` in the axis item (the mapping's other entries stay; added when missing).
+void set_in_axis(YamlText& y, std::size_t index, const std::string& key,
+                 const std::vector<std::pair<std::string, std::string>>& kvs) {
+  const ListItem it = axis_item(y, index);
+  std::size_t at = std::string::npos;
+  if (y.line(it.line).compare(static_cast<std::size_t>(it.key_indent), key.size() + 1, key + ":") == 0) {
+    y.fail(it.line, "'" + key + "' on the list item's first line: edit it by hand");
+  }
+  at = y.find_key(key, it.key_indent, it.line + 1, it.end);
+  if (at != std::string::npos) {
+    set_in_mapping(y, at, kvs);
+    return;
+  }
+  std::string s = "{";
+  for (std::size_t i = 0; i < kvs.size(); ++i) s += (i ? ", " : "") + kvs[i].first + ": " + kvs[i].second;
+  y.insert(it.end, std::string(static_cast<std::size_t>(it.key_indent), ' ') + key + ": " + s + "}");
+}
+
 }  // namespace
 
 std::string config_with_gains(const std::string& text, const std::string& name, const json& g) {
@@ -423,6 +479,36 @@ std::string config_with_gains(const std::string& text, const std::string& name, 
                  {{"cp", num(g.at("cp").get<double>())},
                   {"ci_per_s", num(g.at("ci_per_s").get<double>())},
                   {"cd_s", num(g.at("cd_s").get<double>())}});
+  // Drive models measured by `identify` (the reply's "identified": axis name -> model): the model
+  // the controller uses (machine.axes[].sim) becomes the measured one, and the measurement is
+  // recorded beside it (machine.axes[].identified) for the start-up check.
+  std::vector<std::pair<std::size_t, json>> models;
+  if (g.contains("identified") && g["identified"].is_object() && !g["identified"].empty()) {
+    config::Config before;
+    try {
+      before = config::load_config_string(text, name);
+    } catch (const std::exception& e) {
+      throw std::runtime_error("gains save: " + name + " does not load as it is:\n" + e.what());
+    }
+    for (const auto& [axis, m] : g["identified"].items()) {
+      std::size_t idx = before.machine.axes.size();
+      for (std::size_t i = 0; i < before.machine.axes.size(); ++i) {
+        if (before.machine.axes[i].name == axis) idx = i;
+      }
+      if (idx == before.machine.axes.size()) {
+        throw std::runtime_error("gains save: axis " + axis + " was identified but " + name +
+                                 " has no such axis");
+      }
+      models.emplace_back(idx, m);
+      const std::string k = num(m.at("gain_per_s").get<double>());
+      const std::string t = num(m.at("tau_ms").get<double>());
+      const std::string d = std::to_string(m.at("delay_cycles").get<int>());
+      set_in_axis(y, idx, "sim", {{"gain_per_s", k}, {"tau_ms", t}, {"delay_cycles", d}});
+      set_in_axis(y, idx, "identified",
+                  {{"gain_per_s", k}, {"tau_ms", t}, {"delay_cycles", d},
+                   {"date", "\"" + m.value("date", std::string()) + "\""}});
+    }
+  }
   const std::string out = y.str();
   // Validate and read back: the file must load and give exactly the active gains.
   config::Config c;
@@ -447,9 +533,16 @@ std::string config_with_gains(const std::string& text, const std::string& name, 
            near(c.control.pid_kd_s[i], g["kd_s"][i].get<double>());
     }
   }
+  for (const auto& [idx, m] : models) {
+    const auto& ax = c.machine.axes[idx];
+    ok = ok && near(ax.drive.gain_per_s, m["gain_per_s"].get<double>()) &&
+         near(ax.drive.tau_s * 1e3, m["tau_ms"].get<double>()) &&
+         ax.drive.delay_cycles == m["delay_cycles"].get<int>() && ax.identified.present &&
+         ax.identified.delay_cycles == ax.drive.delay_cycles;
+  }
   if (!ok)
     throw std::runtime_error(
-        "gains save: internal error: the edited config reads back different gains");
+        "gains save: internal error: the edited config reads back different gains or drive models");
   return out;
 }
 

@@ -467,6 +467,11 @@ gains save: rewrites the gain VALUES under `control:` in the YAML config file in
   validated and read back with contourd's own loader before anything is written. Mapping:
   kp -> control.kp (law p) or control.pid.* (law pid); coupling on/off -> controller: ccc | p;
   cp/ci_per_s/cd_s -> control.coupling.*; ff -> control.feed_forward (must be equal on all axes).
+  Axes measured by `identify` since contourd started: their measured gain, time constant and
+  delay become machine.axes[].sim (the model of the Smith predictor and the stability check,
+  applied at the next start) and are recorded in machine.axes[].identified, which contourd checks
+  at start-up (a configured delay that contradicts it is a warning naming the axis);
+  --no-identified leaves the drive models alone.
 
 Plots (gnuplot, PNG; plot CSV... --plot F.png --kind K, or record stop --plot F.png):
   error   contour error vs time (several CSVs overlay, --label per CSV)
@@ -505,6 +510,7 @@ int main(int argc, char** argv) {
   std::string axis;
   double vel = 0.0, dist = 0.0, pos = 0.0, pct = 100.0;
   std::vector<std::string> gains_args, record_args, force_args, csvs, labels;
+  bool gains_no_identified = false;
   std::string gains_file, gains_output, plot_png, plot_kind = "error", plot_title, plot_program;
   double magnify = 0.0, watch_interval = 0.5;
   long watch_count = 0;
@@ -539,6 +545,9 @@ int main(int argc, char** argv) {
   gains->add_option("ARGS", gains_args)->required();
   gains->add_option("--file", gains_file, "gains save: config file to update");
   gains->add_option("--output", gains_output, "gains save: write the edited config here instead");
+  gains->add_flag("--no-identified", gains_no_identified,
+                  "gains save: leave the drive models (machine.axes[].sim) as they are, even for "
+                  "axes measured by identify");
   auto* ovr = app.add_subcommand("override", summary("override", "feed override in percent"));
   ovr->add_option("PERCENT", pct)->required();
   auto* rec =
@@ -661,7 +670,8 @@ int main(int argc, char** argv) {
         file = e != nullptr && *e != '\0' ? e : "/etc/contourd/contourd.yaml";
       }
       Client c(socket_path);
-      const json g = c.call({{"cmd", "gains"}});
+      json g = c.call({{"cmd", "gains"}});
+      if (gains_no_identified) g.erase("identified");
       const std::string edited = config_with_gains(slurp(file), file, g);
       const std::string out = gains_output.empty() ? file : gains_output;
       // Atomic, and owner, group and mode kept (the backup's too): a config readable only by the
@@ -680,6 +690,17 @@ int main(int argc, char** argv) {
             << (gains_output.empty() ? " (previous: " + file + ".bak)" : "")
             << "; `contourd --check-config " << out
             << "` validates it; SIGHUP makes contourd reload it when it is its --config file\n";
+      if (!as_json && g.contains("identified")) {
+        for (const auto& [ax_name, m] : g["identified"].items()) {
+          char b[96];
+          std::snprintf(b, sizeof b, "gain_per_s %.10g, tau_ms %.10g, delay_cycles %d",
+                        m["gain_per_s"].get<double>(), m["tau_ms"].get<double>(),
+                        m["delay_cycles"].get<int>());
+          std::cout << "axis " << ax_name << ": measured drive model stored (machine.axes[].sim and "
+                    << ".identified): " << b
+                    << "; a drive model needs a restart of contourd to take effect\n";
+        }
+      }
       return kExitOk;
     }
     Client c(socket_path);
