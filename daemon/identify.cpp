@@ -45,21 +45,41 @@ nlohmann::json identify_on_loop(ServoLoop& loop, const config::Config& cfg, int 
 
   const std::uint64_t seq0 = st0.identify_seq;
   if (!loop.post({CommandKind::kIdentify, axis})) throw CommandError("identify: loop command queue full");
-  const double duration_s =
-      static_cast<double>(loop.identify_excitation().size()) * cfg.machine.period_s;
-  const auto until = std::chrono::steady_clock::now() +
-                     std::chrono::milliseconds(static_cast<int>(duration_s * 1000.0) + 3000);
+  // Bounded in loop cycles, not wall time: a lockstep loop (bus.lockstep, a slow VM) runs its
+  // cycles slower than real time. The experiment's cycles plus 3 s of cycles; a loop that stops
+  // cycling for 10 s, or 120 s in all, ends the wait.
+  const auto exp_cycles = static_cast<std::uint64_t>(loop.identify_excitation().size());
+  const auto margin_cycles = static_cast<std::uint64_t>(std::ceil(3.0 / cfg.machine.period_s));
+  const std::uint64_t c0 = st0.cycle;
+  const auto t0 = std::chrono::steady_clock::now();
+  auto last_progress = t0;
+  std::uint64_t last_cycle = c0;
   LoopStatus st = loop.status();
   bool started = false;
-  while (std::chrono::steady_clock::now() < until) {
+  bool stalled = false;
+  for (;;) {
     st = loop.status();
     if (st.identify_seq != seq0) break;
     started = started || st.identify_state == IdentifyState::kRunning;
     if (!started && st.state != MachineState::kReady) break;
+    const auto now = std::chrono::steady_clock::now();
+    if (st.cycle != last_cycle) {
+      last_cycle = st.cycle;
+      last_progress = now;
+    }
+    if (st.cycle > c0 + exp_cycles + margin_cycles) break;
+    if (now - last_progress > std::chrono::seconds(10) || now - t0 > std::chrono::seconds(120)) {
+      stalled = true;
+      break;
+    }
     if (give_way && give_way()) {
       throw CommandError("identify " + name + ": interrupted by another client's safety command");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  if (stalled && st.identify_seq == seq0) {
+    throw CommandError("identify " + name + ": the loop stopped cycling (cycle " +
+                       std::to_string(st.cycle) + ")");
   }
   if (st.identify_seq == seq0) {
     throw CommandError(started ? "identify " + name + ": no result within the expected time"

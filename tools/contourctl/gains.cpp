@@ -401,6 +401,10 @@ ListItem axis_item(const YamlText& y, std::size_t index) {
   }
   const std::string& l = y.line(it.line);
   it.key_indent = static_cast<int>(l.find_first_not_of(' ', static_cast<std::size_t>(ab.child_indent) + 1));
+  if (l[static_cast<std::size_t>(it.key_indent)] == '{') {
+    y.fail(it.line, "machine.axes item in flow style ('- {...}'): write it as a block mapping to save "
+                    "a drive model, or use --no-identified");
+  }
   return it;
 }
 
