@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -66,6 +67,15 @@ TEST(DaemonSocket, Table2GivesTheInProcessFigures) {
   EXPECT_NEAR(res["rms_contour_error_um"].get<double>(), off.stats.rms_contour_error_um(), 1e-9);
   EXPECT_EQ(res["samples"].get<std::uint64_t>(), off.stats.samples);
   EXPECT_NEAR(res["duration_s"].get<double>(), off.duration_s, 1e-12);
+  // Issue 16's chatter goal through the daemon: <= 2 mm/s RMS of the cycle-to-cycle change of
+  // each axis' velocity command over the program (round 1: 14.2 / 13.1 / 20.0).
+  const json st = d.ok({{"cmd", "status"}});
+  ASSERT_EQ(st["chatter"]["job"], run["job"]) << st["chatter"].dump();
+  const json& chatter = st["chatter"]["job_rms_mm_s"];
+  ASSERT_EQ(chatter.size(), 3U) << st["chatter"].dump();
+  std::printf("[figure] Table 2 through the daemon: command chatter %.3f / %.3f / %.3f mm/s RMS\n",
+              chatter[0].get<double>(), chatter[1].get<double>(), chatter[2].get<double>());
+  for (const auto& c : chatter) EXPECT_LE(c.get<double>(), 2.0) << st["chatter"].dump();
 }
 
 TEST(DaemonSocket, HoldResumeStaysOnThePathAndEstopReset) {
