@@ -25,6 +25,7 @@ SafetyConfig parse_safety(Section& s) {
   c.missed_tpdo_streak = static_cast<int>(s.integer("missed_tpdo_streak", 3, 1, 1000));
   c.stop_decel_mm_s2 = s.number("stop_decel_mm_s2", 1000.0, 1.0, 1e6);
   c.jog_max_velocity_mm_min = s.number("jog_max_velocity_mm_min", 3000.0, 1.0, 1e6);
+  c.jog_deadman_ms = s.number("jog_deadman_ms", 500.0, 50.0, 10000.0);
   c.standstill_velocity_mm_s = s.number("standstill_velocity_mm_s", 1.0, 1e-3, 100.0);
   c.standstill_time_s = s.number("standstill_time_s", 0.05, 0.0, 10.0);
   c.standstill_timeout_s = s.number("standstill_timeout_s", 2.0, 0.01, 60.0);

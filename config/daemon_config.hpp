@@ -24,6 +24,9 @@ struct SafetyConfig {
   int missed_tpdo_streak = 3;          // consecutive missed TPDOs of one node -> FAULT
   double stop_decel_mm_s2 = 1000.0;    // controlled-stop deceleration along the path
   double jog_max_velocity_mm_min = 3000.0;
+  // Continuous jog dead-man: the jog brakes when the client that started it disconnects or sends
+  // nothing (any request renews it) for this long. Needs a restart.
+  double jog_deadman_ms = 500.0;
   // Power stages are switched off only at standstill (issue 16): after a controlled stop, a
   // `disable` or SIGTERM the drives stay enabled with a zero command until every axis' measured
   // speed has stayed below standstill_velocity_mm_s for standstill_time_s; if that does not happen

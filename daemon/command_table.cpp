@@ -98,12 +98,18 @@ std::vector<CommandSpec> build_table() {
        "DISABLED", "the status object"});
   add({CommandId::kDisable, "disable", "disable the drives", {}, bits({S::kReady, S::kEnabling}),
        true, false, "READY or ENABLING", "the status object"});
-  add({CommandId::kJog, "jog", "jog an axis by a distance",
+  add({CommandId::kJog, "jog",
+       "jog an axis by a distance, or continuously towards its soft limit while the client stays "
+       "(dead-man: a disconnect, or no request for safety.jog_deadman_ms, brakes it; `stop` too)",
        {typed("axis", ArgType::kAxis, true, "an axis name or index", "axis name or index"),
         number("velocity_mm_min", true, 1e-3, kInf, "speed, up to safety.jog_max_velocity_mm_min",
                Bound::kJogVelocity),
-        number("distance_mm", true, -1e4, 1e4, "signed distance, not 0; target inside the soft limits")},
-       bits({S::kReady}), false, false, "READY, no program loaded, not jogging", "{axis, target_mm}"});
+        number("distance_mm", false, -1e4, 1e4,
+               "signed distance, not 0; target inside the soft limits (or give continuous)"),
+        typed("continuous", ArgType::kChoice, false, "+ or -",
+              "jog continuously in this direction (instead of distance_mm)", "+|-")},
+       bits({S::kReady}), false, false, "READY, no program loaded, not jogging",
+       "{axis, target_mm} (continuous: also deadman_ms)"});
   const std::vector<ArgSpec> setpos{
       typed("axis", ArgType::kAxis, true, "an axis name or index", "axis name or index"),
       number("position_mm", true, -kInf, kInf, "new position, inside the axis' soft limits",

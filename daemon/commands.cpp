@@ -530,12 +530,28 @@ json Daemon::cmd_gains(const json& req) {
   return params_json();
 }
 
-json Daemon::cmd_jog(const json& req) {
+json Daemon::cmd_jog(const json& req, const ClientInfo& client) {
   const int axis = axis_index(req.at("axis"), cfg_.machine);
   const double v = req.at("velocity_mm_min").get<double>();  // ranges: the command table
-  const double d = req.at("distance_mm").get<double>();
-  if (d == 0.0) throw CommandError("argument 'distance_mm' must not be 0");
+  const bool continuous = req.contains("continuous");
+  if (continuous == req.contains("distance_mm")) {
+    throw CommandError("jog: give exactly one of 'distance_mm' and 'continuous'");
+  }
   const auto st = loop_->status();
+  const LiveLimits live = loop_->active_limits();
+  double d = 0.0;
+  if (continuous) {
+    // Towards the soft limit (the loop's jog stops there); the dead-man brakes it before.
+    const auto ai = static_cast<std::size_t>(axis);
+    d = req.at("continuous").get<std::string>() == "+" ? live.max_mm[ai] - st.ref_mm[ai]
+                                                       : live.min_mm[ai] - st.ref_mm[ai];
+    if (std::abs(d) < 1e-6) {
+      throw CommandError("jog: " + cfg_.machine.axes[ai].name + " is at its soft limit in that direction");
+    }
+  } else {
+    d = req.at("distance_mm").get<double>();
+  }
+  if (d == 0.0) throw CommandError("argument 'distance_mm' must not be 0");
   if (st.state != MachineState::kReady || st.attached_job != 0 || st.jogging) {
     throw CommandError(std::string("jog is not allowed in state ") + std::string(to_string(st.state)) +
                        (st.attached_job != 0 ? " with a program loaded (stop unloads it)" : "") +
@@ -550,7 +566,28 @@ json Daemon::cmd_jog(const json& req) {
                        ax.name + " [" + std::to_string(lim.min_mm[a]) + ", " +
                        std::to_string(lim.max_mm[a]) + "]");
   }
+  // Incremental jogs have no owner; a continuous one belongs to this connection until it ends.
+  jog_owner_.store(continuous ? client.id : 0);
+  jog_renewed_ns_.store(std::chrono::steady_clock::now().time_since_epoch().count());
   loop_->post({CommandKind::kJog, axis, v / 60.0, d});
+  if (continuous) {
+    // Reply only once the loop jogs: a client that disconnects right after the reply must find a
+    // jog to brake.
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    while (!loop_->status().jogging && std::chrono::steady_clock::now() < until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    if (!loop_->status().jogging) {
+      jog_owner_.store(0);
+      throw CommandError("jog refused by the loop (state " +
+                         std::string(to_string(loop_->status().state)) + ")");
+    }
+    jog_renewed_ns_.store(std::chrono::steady_clock::now().time_since_epoch().count());
+    spdlog::info("continuous jog {} {} at {} mm/min by client {} (pid {}): dead-man {} ms", ax.name,
+                 req.at("continuous").get<std::string>(), v, client.id, client.pid,
+                 cfg_.safety.jog_deadman_ms);
+    return {{"axis", ax.name}, {"target_mm", target}, {"deadman_ms", cfg_.safety.jog_deadman_ms}};
+  }
   return {{"axis", ax.name}, {"target_mm", target}};
 }
 
@@ -648,6 +685,10 @@ std::pair<double, double> Daemon::bound(Bound b, const json& req) const {
 // Dispatch from the command table (daemon/command_table.hpp): arguments and (for gated
 // commands) the state are checked from the table before the handler runs.
 json Daemon::handle(const json& req, const ClientInfo& client) {
+  // Any request from the owner of a continuous jog renews its dead-man.
+  if (client.id != 0 && client.id == jog_owner_.load()) {
+    jog_renewed_ns_.store(std::chrono::steady_clock::now().time_since_epoch().count());
+  }
   const std::string cmd = req.at("cmd").get<std::string>();
   const CommandSpec* spec = find_command(cmd);
   if (spec == nullptr) throw CommandError("unknown command '" + cmd + "'");
@@ -738,7 +779,7 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     }
     case CommandId::kEnable: return simple(CommandKind::kEnable);
     case CommandId::kDisable: return simple(CommandKind::kDisable);
-    case CommandId::kJog: return cmd_jog(req);
+    case CommandId::kJog: return cmd_jog(req, client);
     case CommandId::kSetPosition:
     case CommandId::kHome: return cmd_set_position(req);
     case CommandId::kGains: return cmd_gains(req);

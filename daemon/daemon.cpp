@@ -260,9 +260,37 @@ void Daemon::start_components() {
                                                 {"uid", n.client.uid}, {"fd", n.client.fd}}},
                                     {"text", n.text}});
       });
+  server_->on_disconnect([this](const ClientInfo& c) { jog_deadman(c.id, "its client disconnected"); });
   server_->start();
   components_ready_.store(true, std::memory_order_release);
   spdlog::info("command socket {}", so.path);
+}
+
+void Daemon::jog_deadman(std::uint64_t client_id, const char* why) {
+  std::uint64_t owner = client_id;
+  if (client_id == 0 || !jog_owner_.compare_exchange_strong(owner, 0)) return;
+  // Harmless when the jog has already ended (the loop brakes only an active jog; a newer jog
+  // would have taken the ownership away).
+  loop_->post({CommandKind::kJogBrake});
+  spdlog::warn("continuous jog braked: {} (client {}, dead-man safety.jog_deadman_ms {})", why,
+               client_id, cfg_.safety.jog_deadman_ms);
+}
+
+void Daemon::check_jog_deadman() {
+  const std::uint64_t owner = jog_owner_.load();
+  if (owner == 0) return;
+  if (!loop_->status().jogging) {
+    // Ended (soft limit, `stop`, a state change): the connection owns nothing any more. A new
+    // jog sets the owner again.
+    std::uint64_t o = owner;
+    const auto age = std::chrono::steady_clock::now().time_since_epoch().count() - jog_renewed_ns_.load();
+    if (age > 200'000'000) jog_owner_.compare_exchange_strong(o, 0);  // past the loop's start
+    return;
+  }
+  const auto age_ns = std::chrono::steady_clock::now().time_since_epoch().count() - jog_renewed_ns_.load();
+  if (static_cast<double>(age_ns) > cfg_.safety.jog_deadman_ms * 1e6) {
+    jog_deadman(owner, "no request from its client within safety.jog_deadman_ms");
+  }
 }
 
 void Daemon::stop_components() {
@@ -609,6 +637,7 @@ int Daemon::run() {
     if (sig == SIGHUP) reload_config();
     if (sig == SIGUSR1 || sig == SIGUSR2) out_of_band_signal(sig, info.si_pid, info.si_uid);
     free_released_jobs();
+    check_jog_deadman();
     if (watchdog) {
       const auto now = std::chrono::steady_clock::now();
       const std::uint64_t c = loop_->status().cycle;

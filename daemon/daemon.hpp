@@ -107,7 +107,14 @@ class Daemon {
   nlohmann::json cmd_upload(const nlohmann::json& req, const ClientInfo& client);  // commands_files.cpp
   void check_paths();  // socket directory, telemetry directory: StartupConfigError
   nlohmann::json cmd_gains(const nlohmann::json& req);
-  nlohmann::json cmd_jog(const nlohmann::json& req);
+  nlohmann::json cmd_jog(const nlohmann::json& req, const ClientInfo& client);
+  // Continuous jog dead-man (safety.jog_deadman_ms): the connection that owns the jog (0: none),
+  // when it last sent a request (steady_clock ns); braked on its disconnect (server thread) or
+  // silence (main thread, every 100 ms). `why` goes to the log.
+  std::atomic<std::uint64_t> jog_owner_{0};
+  std::atomic<std::int64_t> jog_renewed_ns_{0};
+  void jog_deadman(std::uint64_t client_id, const char* why);
+  void check_jog_deadman();
   nlohmann::json cmd_set_position(const nlohmann::json& req);
   nlohmann::json cmd_record(const nlohmann::json& req);
   nlohmann::json cmd_force(const nlohmann::json& req);

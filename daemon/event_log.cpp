@@ -76,6 +76,7 @@ std::string_view to_string(CommandKind k) noexcept {
     case CommandKind::kSetPosition: return "set-position";
     case CommandKind::kForce: return "force";
     case CommandKind::kIdentify: return "identify";
+    case CommandKind::kJogBrake: return "jog brake (dead-man)";
   }
   return "?";
 }

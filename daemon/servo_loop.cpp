@@ -352,6 +352,11 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       jog_.start(c.axis, c.a, ref_[c.axis] + c.b);
       break;
     }
+    case CommandKind::kJogBrake:
+      if (jog_.active()) {
+        jog_.brake(ref_[jog_.axis()], limits_.max_accel_mm_s2[static_cast<std::size_t>(jog_.axis())]);
+      }
+      break;
     case CommandKind::kSetOverride:
       feed_override_ = std::clamp(std::isfinite(c.a) ? c.a : 0.0, 0.0, limits_.feed_override_max);
       break;

@@ -65,6 +65,7 @@ enum class CommandKind : std::uint8_t {
   kSetPosition,  // axis, a = position mm; DISABLED/READY only (bus.set_position on the RT thread)
   kForce,        // axis: 1 = on, 0 = off, -1 = unchanged; a = reference N (NaN = unchanged)
   kIdentify,     // axis: play the identification excitation on it (READY, nothing loaded/jogging)
+  kJogBrake,     // brake a jog at the axis' deceleration (continuous jog's dead-man); else nothing
 };
 
 // Drive identification (issue 16, `contourctl identify`): the loop plays a preallocated velocity

@@ -509,6 +509,7 @@ int main(int argc, char** argv) {
   std::string program;
   std::string axis;
   double vel = 0.0, dist = 0.0, pos = 0.0, pct = 100.0;
+  std::string jog_dir;
   std::vector<std::string> gains_args, record_args, force_args, csvs, labels;
   bool gains_no_identified = false;
   std::string gains_file, gains_output, plot_png, plot_kind = "error", plot_title, plot_program;
@@ -532,10 +533,16 @@ int main(int argc, char** argv) {
        {"hold", "resume", "stop", "estop", "reset", "enable", "disable", "shutdown"}) {
     app.add_subcommand(c, summary(c, c));
   }
-  auto* jog = app.add_subcommand("jog", summary("jog", "jog an axis by a distance"));
+  auto* jog = app.add_subcommand(
+      "jog", "jog AXIS VELOCITY_MM_MIN DISTANCE_MM, or jog AXIS VELOCITY_MM_MIN --continuous +|-: "
+             "moves while this command runs (Ctrl-C, `contourctl stop`, or the soft limit ends it)");
   jog->add_option("AXIS", axis)->required();
   jog->add_option("VELOCITY_MM_MIN", vel)->required();
-  jog->add_option("DISTANCE_MM", dist)->required();
+  jog->add_option("DISTANCE_MM", dist);
+  jog->add_option("--continuous", jog_dir,
+                  "+ or -: jog until Ctrl-C / stop / the soft limit; the daemon brakes the axis when "
+                  "this client goes away (dead-man)")
+      ->check(CLI::IsMember({"+", "-"}));
   auto* setpos =
       app.add_subcommand("set-position", "set an axis position (sim / absolute encoders)");
   setpos->add_option("AXIS", axis)->required();
@@ -721,6 +728,30 @@ int main(int argc, char** argv) {
     } else if (cmd == "jog") {
       req["axis"] = axis;
       req["velocity_mm_min"] = vel;
+      if (!jog_dir.empty()) {
+        // Continuous: this connection is the dead-man. It renews the jog with a status request
+        // every 100 ms and ends when the jog does; Ctrl-C closes it and the daemon brakes.
+        req["continuous"] = jog_dir;
+        const json r = c.call(req);
+        if (as_json) print(r, true);
+        else std::printf("jog: %s %s continuously (Ctrl-C stops it)\n", r.value("axis", axis).c_str(), jog_dir.c_str());
+        std::fflush(stdout);
+        for (int n = 0;; ++n) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(100));
+          const json st = c.call({{"cmd", "status"}});
+          if (!as_json && n % 5 == 0 && st.contains("act_mm")) {
+            std::printf("  position %s mm\n", st["act_mm"].dump().c_str());
+            std::fflush(stdout);
+          }
+          if (!st.value("jogging", false)) break;
+        }
+        if (!as_json) std::printf("jog ended\n");
+        return kExitOk;
+      }
+      if (!jog->count("DISTANCE_MM")) {
+        std::cerr << "contourctl: jog AXIS VELOCITY_MM_MIN DISTANCE_MM, or --continuous +|-\n";
+        return kExitUsage;
+      }
       req["distance_mm"] = dist;
     } else if (cmd == "set-position") {
       req["axis"] = axis;
