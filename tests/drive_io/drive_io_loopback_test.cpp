@@ -10,6 +10,7 @@
 //   - a drive without 0x60FD, and a one-PDO drive, stop the start-up naming node and object.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <deque>
 #include <filesystem>
 #include <fstream>
@@ -174,6 +175,15 @@ TEST(DriveIoLoopback, NodesWithoutBindingsKeepTheirConfigurationBitForBit) {
   auto has = [](const std::vector<W>& v, W w) { return std::find(v.begin(), v.end(), w) != v.end(); };
   EXPECT_TRUE(has(x_plain, W{0x1801, 1, 0x80000000u | 0x281}));  // TPDO2 off
   EXPECT_TRUE(has(x_plain, W{0x1401, 1, 0x80000000u | 0x301}));  // RPDO2 off
+  // ... and never mapped: no write to the mapping of TPDO2/RPDO2, nor to 0x60FE.
+  auto touches = [](const std::vector<W>& v, std::uint16_t index) {
+    return std::any_of(v.begin(), v.end(), [&](const W& w) { return w.index == index; });
+  };
+  for (const auto* v : {&x_plain, &y_plain, &y_io}) {
+    EXPECT_FALSE(touches(*v, 0x1A01));
+    EXPECT_FALSE(touches(*v, 0x1601));
+    EXPECT_FALSE(touches(*v, 0x60FE));
+  }
 
   // X with bindings: TPDO1/RPDO1 as before, TPDO2 = {0x60FD:00, 32 bit} on 0x281, RPDO2 =
   // {0x60FE:01, 32 bit} on 0x301, 0x60FE:02 = bits 16 and 18.
