@@ -106,7 +106,8 @@ struct Scratch {
     dir = std::filesystem::temp_directory_path() /
           ("drive_io_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
     std::filesystem::create_directories(dir);
-    std::ofstream(dir / "io.st") << "PROGRAM io\n  x_lamp := x_pos_limit;\n  x_valve := x_cam;\nEND_PROGRAM\n";
+    std::ofstream(dir / "io.st")
+        << "PROGRAM io\n  x_lamp := x_pos_limit;\n  x_valve := x_cam;\nEND_PROGRAM\n";
   }
   ~Scratch() { std::filesystem::remove_all(dir); }
   config::Config load(const std::string& text) {
@@ -128,7 +129,8 @@ sim::SimDriveSetup drive(std::uint8_t node, const std::string& name) {
   s.period_s = 0.001;
   // As contour-machine-sim's defaults, plus two cams: bit 16 on right away (above -1 mm), bit 17
   // once the axis passes +1 mm.
-  s.switches = {{0, -202.0, false}, {1, 202.0, true}, {2, -199.5, false}, {16, -1.0, true}, {17, 1.0, true}};
+  s.switches = {
+      {0, -202.0, false}, {1, 202.0, true}, {2, -199.5, false}, {16, -1.0, true}, {17, 1.0, true}};
   return s;
 }
 
@@ -172,7 +174,9 @@ TEST(DriveIoLoopback, NodesWithoutBindingsKeepTheirConfigurationBitForBit) {
     EXPECT_NE(x_plain[k].index, 0x60FE) << k;
   }
   using W = Loopback::Write;
-  auto has = [](const std::vector<W>& v, W w) { return std::find(v.begin(), v.end(), w) != v.end(); };
+  auto has = [](const std::vector<W>& v, W w) {
+    return std::find(v.begin(), v.end(), w) != v.end();
+  };
   EXPECT_TRUE(has(x_plain, W{0x1801, 1, 0x80000000u | 0x281}));  // TPDO2 off
   EXPECT_TRUE(has(x_plain, W{0x1401, 1, 0x80000000u | 0x301}));  // RPDO2 off
   // ... and never mapped: no write to the mapping of TPDO2/RPDO2, nor to 0x60FE.
@@ -214,7 +218,7 @@ TEST(DriveIoLoopback, InputsComeInTpdo2AndOutputsGoOutInRpdo2) {
   ASSERT_TRUE(fb.axis[0].fresh);
   EXPECT_TRUE(fb.axis[0].digital_inputs_present);
   EXPECT_TRUE(fb.axis[0].digital_inputs_fresh);
-  EXPECT_EQ(fb.axis[0].digital_inputs, 1u << 16);  // at 0 mm: only the cam below it
+  EXPECT_EQ(fb.axis[0].digital_inputs, 1u << 16);   // at 0 mm: only the cam below it
   EXPECT_FALSE(fb.axis[1].digital_inputs_present);  // Y maps no 0x60FD
   EXPECT_FALSE(fb.axis[1].digital_inputs_fresh);
   EXPECT_EQ(b.can.drives[0]->digital_outputs(), 1u << 16);

@@ -54,44 +54,42 @@ struct Files {
   fs::path dir;
 };
 
-TEST(DriveIoHil, CamInTpdo2AndOutputInRpdo2OverVcan) {
+// One test (the HIL budget): the mapped I/O, then the start-up error with a second simulator.
+TEST(DriveIoHil, CamInTpdo2OutputInRpdo2AndMissing60FDOverVcan) {
   Files f;
   const auto cfg = contour::config::load_config_file(f.config());
-  contour::test::MachineSim sim({"--input-switch", "1:16:above:-1"}, f.config());
-  ASSERT_TRUE(sim.ready()) << sim.poll_output();
-  CanopenBus bus(cfg, {});
-  bus.set_event_thread(false);
-  bus.start();
-  AxisCommands cmd;
-  cmd.digital_outputs[0] = 1u << 17;
-  cmd.digital_output_mask[0] = 1u << 17;
-  BusFeedback fb;
-  int fresh = 0;
-  for (int k = 0; k < 50; ++k) {
-    bus.begin_cycle();
-    bus.read(fb);
-    bus.write(cmd);
-    if (fb.axis[0].digital_inputs_fresh) {
-      ++fresh;
-      EXPECT_EQ(fb.axis[0].digital_inputs, 1u << 16) << k;  // the cam; no limit/home switch at 0
+  {
+    contour::test::MachineSim sim({"--input-switch", "1:16:above:-1"}, f.config());
+    ASSERT_TRUE(sim.ready()) << sim.poll_output();
+    CanopenBus bus(cfg, {});
+    bus.set_event_thread(false);
+    bus.start();
+    AxisCommands cmd;
+    cmd.digital_outputs[0] = 1u << 17;
+    cmd.digital_output_mask[0] = 1u << 17;
+    BusFeedback fb;
+    int fresh = 0;
+    for (int k = 0; k < 50; ++k) {
+      bus.begin_cycle();
+      bus.read(fb);
+      bus.write(cmd);
+      if (fb.axis[0].digital_inputs_fresh) {
+        ++fresh;
+        EXPECT_EQ(fb.axis[0].digital_inputs, 1u << 16) << k;  // the cam; no limit/home switch at 0
+      }
     }
+    EXPECT_EQ(fresh, 50);
+    EXPECT_TRUE(fb.axis[0].digital_inputs_present);
+    EXPECT_FALSE(fb.axis[1].digital_inputs_present);
+    const auto out = bus.master()->sdo_upload(1, 0x60FE, 1);
+    ASSERT_EQ(out.size(), 4u);
+    EXPECT_EQ(contour::drivers::canopen::get_u32(out.data()), 1u << 17);
+    const auto mask = bus.master()->sdo_upload(1, 0x60FE, 2);
+    EXPECT_EQ(contour::drivers::canopen::get_u32(mask.data()), 1u << 17);
+    const auto y = bus.master()->sdo_upload(2, 0x60FE, 1);
+    EXPECT_EQ(contour::drivers::canopen::get_u32(y.data()), 0u);  // Y maps no outputs
+    bus.stop();
   }
-  EXPECT_EQ(fresh, 50);
-  EXPECT_TRUE(fb.axis[0].digital_inputs_present);
-  EXPECT_FALSE(fb.axis[1].digital_inputs_present);
-  const auto out = bus.master()->sdo_upload(1, 0x60FE, 1);
-  ASSERT_EQ(out.size(), 4u);
-  EXPECT_EQ(contour::drivers::canopen::get_u32(out.data()), 1u << 17);
-  const auto mask = bus.master()->sdo_upload(1, 0x60FE, 2);
-  EXPECT_EQ(contour::drivers::canopen::get_u32(mask.data()), 1u << 17);
-  const auto y = bus.master()->sdo_upload(2, 0x60FE, 1);
-  EXPECT_EQ(contour::drivers::canopen::get_u32(y.data()), 0u);  // Y maps no outputs
-  bus.stop();
-}
-
-TEST(DriveIoHil, DriveWithout60FDIsAStartUpErrorNamingNodeAndObject) {
-  Files f;
-  const auto cfg = contour::config::load_config_file(f.config());
   contour::test::MachineSim sim({"--missing-object", "1:0x60FD"}, f.config());
   ASSERT_TRUE(sim.ready()) << sim.poll_output();
   CanopenBus bus(cfg, {});

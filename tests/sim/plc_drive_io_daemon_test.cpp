@@ -5,6 +5,7 @@
 // program derives from the home switch refuses `run` until the axis leaves it. Bounded polls.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -12,7 +13,6 @@
 #include <sstream>
 #include <string>
 #include <thread>
-#include <chrono>
 
 #include "tests/support/daemon_process.hpp"
 
@@ -39,17 +39,19 @@ json wait_io(contour::test::DaemonProcess& d, const std::string& name, bool valu
 }
 
 TEST(PlcDriveIoDaemon, HomeSwitchOnTheDriveInputReachesThePlcAndItsOutput) {
-  const fs::path dir = fs::temp_directory_path() / ("drive_io_daemon_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("drive_io_daemon_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   std::stringstream sim;
   sim << std::ifstream(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml").rdbuf();
   std::ofstream(dir / "home.st") << "PROGRAM homing\n  NC.inhibit_start := x_home;\n"
                                     "  x_lamp := x_home;\nEND_PROGRAM\n";
-  std::ofstream(dir / "c.yaml") << sim.str()
-                                << "\nplc:\n  programs: [{file: home.st}]\n  signals:\n"
-                                   "    - {name: x_home, cia402: {axis: X, input: home_switch}}\n"
-                                   "    - {name: x_plus, cia402: {axis: X, input: positive_limit}}\n"
-                                   "    - {name: x_lamp, cia402: {axis: X, output: 16}}\n";
+  std::ofstream(dir / "c.yaml")
+      << sim.str()
+      << "\nplc:\n  programs: [{file: home.st}]\n  signals:\n"
+         "    - {name: x_home, cia402: {axis: X, input: home_switch}}\n"
+         "    - {name: x_plus, cia402: {axis: X, input: positive_limit}}\n"
+         "    - {name: x_lamp, cia402: {axis: X, output: 16}}\n";
   contour::test::DaemonProcess::Options o;
   o.config = (dir / "c.yaml").string();
   {
@@ -66,7 +68,8 @@ TEST(PlcDriveIoDaemon, HomeSwitchOnTheDriveInputReachesThePlcAndItsOutput) {
 
     // Onto the home switch (min_mm -200: on below -199.5 mm).
     d.ok({{"cmd", "set-position"}, {"axis", "X"}, {"position_mm", -199.8}});
-    json st = d.wait_status([](const json& s) { return s["plc"]["requests"]["inhibit_start"] == true; }, 500);
+    json st = d.wait_status(
+        [](const json& s) { return s["plc"]["requests"]["inhibit_start"] == true; }, 500);
     EXPECT_EQ(st["plc"]["requests"]["inhibit_start"], true) << d.log();
     io = wait_io(d, "x_lamp", true);
     EXPECT_EQ(signal(io, "x_home")["value"], true);
@@ -76,15 +79,18 @@ TEST(PlcDriveIoDaemon, HomeSwitchOnTheDriveInputReachesThePlcAndItsOutput) {
     // 600 cycles, three times what the jog would take.
     d.call({{"cmd", "jog"}, {"axis", "X"}, {"velocity_mm_min", 300}, {"distance_mm", 1.0}});
     const std::uint64_t c0 = d.ok({{"cmd", "status"}})["cycle"].get<std::uint64_t>();
-    st = d.wait_status([&](const json& s) { return s["cycle"].get<std::uint64_t>() > c0 + 600; }, 3000);
+    st = d.wait_status([&](const json& s) { return s["cycle"].get<std::uint64_t>() > c0 + 600; },
+                       3000);
     EXPECT_NEAR(st["act_mm"][0].get<double>(), -199.8, 0.01) << st.dump();
 
     d.ok({{"cmd", "set-position"}, {"axis", "X"}, {"position_mm", 0.0}});
-    st = d.wait_status([](const json& s) { return s["plc"]["requests"]["inhibit_start"] == false; }, 500);
+    st = d.wait_status([](const json& s) { return s["plc"]["requests"]["inhibit_start"] == false; },
+                       500);
     EXPECT_EQ(st["plc"]["requests"]["inhibit_start"], false) << d.log();
     EXPECT_EQ(signal(wait_io(d, "x_lamp", false), "x_lamp")["value"], false);
     d.ok({{"cmd", "jog"}, {"axis", "X"}, {"velocity_mm_min", 300}, {"distance_mm", 1.0}});
-    st = d.wait_status([](const json& s) { return std::abs(s["act_mm"][0].get<double>() - 1.0) < 0.01; }, 3000);
+    st = d.wait_status(
+        [](const json& s) { return std::abs(s["act_mm"][0].get<double>() - 1.0) < 0.01; }, 3000);
     EXPECT_NEAR(st["act_mm"][0].get<double>(), 1.0, 0.01) << st.dump();
   }
   fs::remove_all(dir);

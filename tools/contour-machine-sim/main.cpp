@@ -362,6 +362,7 @@ int main(int argc, char** argv) {
         {0x000, 0x7FF}, {0x080, 0x7FF}, {0x700, 0x780}};
     for (const auto& s : setups) {
       filters.push_back({0x200u + s.node_id, 0x7FF});
+      filters.push_back({0x300u + s.node_id, 0x7FF});  // RPDO2: 0x60FE:01 (drive digital outputs)
       filters.push_back({0x600u + s.node_id, 0x7FF});
     }
     bus = std::make_unique<contour::drivers::SocketCan>(iface, filters);

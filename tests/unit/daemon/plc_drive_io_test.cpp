@@ -7,12 +7,12 @@
 //     on; the PLC's lamp on 0x60FE:01 bit 16 reaches the drive; inputs older than the missed-TPDO
 //     streak take their defaults; `io` names the source "axis x 0x60FD bit 1"; no allocation in
 //     10k cycles with the bindings.
+#include <gtest/gtest.h>
+
 #include <fstream>
 #include <map>
 #include <sstream>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "daemon/plc_engine.hpp"
 #include "daemon/plc_status.hpp"
