@@ -32,6 +32,15 @@ struct AxisFeedback {
   // whether it left NMT operational (boot-up, stopped, pre-operational) while the loop cycled.
   std::uint16_t emcy_code = 0;
   bool nmt_lost = false;
+  // CiA 402 digital inputs 0x60FD (bit 0 negative limit, 1 positive limit, 2 home switch,
+  // 3 interlock, 16..31 manufacturer). `digital_inputs_present`: this bus maps them for this
+  // axis (CANopen: only drives a plc.signals cia402 binding names, in TPDO2). `digital_inputs_fresh`:
+  // the value arrived with this cycle's feedback; otherwise `digital_inputs` is the last one
+  // received (0 before the first) and the consumer judges its age (ServoLoop: at most
+  // safety.missed_tpdo_streak - 1 cycles, like the position).
+  bool digital_inputs_present = false;
+  bool digital_inputs_fresh = false;
+  std::uint32_t digital_inputs = 0;
 };
 
 // The spindle drive on the same bus (CANopen bus.spindle, or the simulated machine's spindle).
@@ -57,6 +66,12 @@ struct AxisCommands {
   std::array<double, kMaxAxes> velocity_mm_s{};
   DriveMode mode = DriveMode::kDisabled;
   double spindle_rpm = 0.0;
+  // CiA 402 digital outputs 0x60FE:01 per axis: the bits in `digital_output_mask` are driven to
+  // their value in `digital_outputs` (others 0). CANopen: RPDO2 of drives with a cia402 output
+  // binding (0x60FE:02, the drive's enable mask, is written once at start-up); ignored for
+  // axes that map no outputs.
+  std::array<std::uint32_t, kMaxAxes> digital_outputs{};
+  std::array<std::uint32_t, kMaxAxes> digital_output_mask{};
 };
 
 class AxisBus {

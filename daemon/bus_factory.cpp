@@ -17,7 +17,9 @@ std::unique_ptr<AxisBus> make_axis_bus(const config::Config& cfg, BusLog log) {
   if (cfg.bus.type != "sim") {
     throw std::runtime_error("bus.type '" + cfg.bus.type + "' is not supported (sim, socketcan)");
   }
-  return std::make_unique<SimBus>(sim_bus_drives(cfg));
+  auto bus = std::make_unique<SimBus>(sim_bus_drives(cfg));
+  add_default_input_switches(*bus, cfg);  // 0x60FD limit/home switches (plc cia402 bindings)
+  return bus;
 }
 
 }  // namespace contour::daemon

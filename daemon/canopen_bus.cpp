@@ -145,7 +145,10 @@ void CanopenBus::run_cycles_for_stop() noexcept {
       enabled = enabled || master_->node(i).state == co::Cia402State::kOperationEnabled;
     // Quick stop while a drive still runs, then disable voltage.
     master_->set_request_all(enabled ? co::DriveRequest::kQuickStop : co::DriveRequest::kDisabled);
-    for (std::size_t i = 0; i < master_->size(); ++i) master_->set_target(i, 0);
+    for (std::size_t i = 0; i < master_->size(); ++i) {
+      master_->set_target(i, 0);
+      master_->set_digital_outputs(i, 0);  // the PLC's drive outputs off with the drives
+    }
     master_->send_rpdos();
     if ((!powered && k > 2) || silent > 3) break;
     if (!lockstep_) {
@@ -218,6 +221,9 @@ void CanopenBus::read(BusFeedback& fb) noexcept {
         have_last_[i] = true;
       }
     }
+    f.digital_inputs_present = master_->setup(i).digital_inputs;
+    f.digital_inputs_fresh = f.digital_inputs_present && r.digital_inputs_fresh;
+    f.digital_inputs = r.digital_inputs;
     f.statusword = r.statusword;
     f.node_id = master_->setup(i).node_id;
     f.emcy_code = r.emcy_code;
@@ -270,6 +276,7 @@ void CanopenBus::write(const AxisCommands& cmd) noexcept {
     } else {
       master_->set_target(a, co::mm_s_to_counts_s(cmd.velocity_mm_s[a], counts_per_mm_[a]));
     }
+    master_->set_digital_outputs(a, cmd.digital_outputs[a] & cmd.digital_output_mask[a]);
   }
   if (spindle_index_ >= 0) {
     const auto s = static_cast<std::size_t>(spindle_index_);

@@ -13,6 +13,9 @@
 //   spindle 0x60FF = round(spindle_rpm) (the simulated spindle drive's unit is rpm)
 //   CSP axes: 0x607A = the integral of the velocity commands, from the actual position at enable
 //   (the offline model, SimBus, models CSV drives only)
+//   digital I/O (axes a plc.signals cia402 binding names; daemon/PLC.md "Drive I/O"): 0x60FD
+//   from TPDO2 -> AxisFeedback::digital_inputs (present, fresh when TPDO2 came this cycle);
+//   AxisCommands::digital_outputs & mask -> 0x60FE:01 in RPDO2; 0 on stop()
 // DriveMode -> CiA 402 request for every axis node (the master's sequencer walks the power state
 // machine one controlword per cycle): kEnabled -> enable operation, kDisabled -> disable
 // voltage, kQuickStop -> quick stop. A change from not-enabled to kEnabled sends the fault-reset

@@ -34,6 +34,25 @@ inline drivers::canopen::DriveQuirks to_quirks(const config::DriveProfile& p) {
   return q;
 }
 
+// The PLC's cia402 bindings (plc.signals) -> which axis nodes map 0x60FD (TPDO2) and which
+// 0x60FE:01 bits (RPDO2). Axis i is node i of `c` (resolve_bus_nodes: axes first, in
+// machine.axes order). Nodes no binding names keep their mapping as it was.
+inline void add_digital_io(const config::Config& cfg, drivers::canopen::MasterConfig& c) {
+  if (!cfg.plc.present) return;
+  for (const auto& sig : cfg.plc.signals) {
+    const auto& b = sig.binding;
+    if (b.kind != config::PlcBindingKind::kCia402 || b.axis < 0) continue;
+    const auto a = static_cast<std::size_t>(b.axis);
+    if (a >= cfg.machine.axes.size() || a >= c.nodes.size()) continue;
+    auto& n = c.nodes[a];
+    if (sig.direction == config::PlcDirection::kInput) {
+      n.digital_inputs = true;
+    } else if (sig.direction == config::PlcDirection::kOutput && b.bit >= 0 && b.bit < 32) {
+      n.digital_output_mask |= 1u << b.bit;
+    }
+  }
+}
+
 // Throws config::ConfigError (duplicate node-ids, ...).
 inline drivers::canopen::MasterConfig master_config_from(const config::Config& cfg) {
   using drivers::canopen::DriveMode;
@@ -73,6 +92,7 @@ inline drivers::canopen::MasterConfig master_config_from(const config::Config& c
     s.quirks = to_quirks(n.profile);
     c.nodes.push_back(s);
   }
+  add_digital_io(cfg, c);
   return c;
 }
 

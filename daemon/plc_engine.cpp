@@ -1018,7 +1018,9 @@ PlcSnapshot PlcEngine::snapshot() const {
           break;
         }
         case cfgns::PlcBindingKind::kCia402:
-          v.source = "cia402 " + b.axis_name + (sc.direction == cfgns::PlcDirection::kInput ? " 0x60FD" : " 0x60FE:01") +
+          // "axis x 0x60FD bit 1": the drive of machine.axes' axis, the object and its bit.
+          v.source = "axis " + lower(b.axis_name) +
+                     (sc.direction == cfgns::PlcDirection::kInput ? " 0x60FD" : " 0x60FE:01") +
                      " bit " + std::to_string(b.bit);
           break;
         case cfgns::PlcBindingKind::kCia401: {

@@ -44,21 +44,19 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
       telemetry_(static_cast<std::size_t>(cfg.telemetry.ring_capacity)) {
   axes_ = static_cast<int>(cfg.machine.axes.size());
   if (axes_ < 1 || axes_ > 3) throw std::invalid_argument("servo loop: 1 to 3 axes");
-  // The PLC engine reads CiA 402 drive inputs (0x60FD) and CiA 401 modules from the loop's
-  // feedback, which no bus maps into its PDOs yet: such a signal would sit at its default
-  // forever. Refused at start-up instead of ignored.
+  // The PLC engine reads CiA 401 modules from the loop's feedback, which no bus maps into its
+  // PDOs yet: such a signal would sit at its default forever. Refused at start-up instead of
+  // ignored. (CiA 402 drive I/O, 0x60FD/0x60FE, is mapped: AxisFeedback/AxisCommands.)
   if (cfg.plc.present) {
     for (const auto& sig : cfg.plc.signals) {
-      const auto k = sig.binding.kind;
-      if (k != config::PlcBindingKind::kCia402 && k != config::PlcBindingKind::kCia401) continue;
+      if (sig.binding.kind != config::PlcBindingKind::kCia401) continue;
       throw std::invalid_argument(
-          sig.where + ": plc signal '" + sig.name + "': " +
-          (k == config::PlcBindingKind::kCia402 ? "cia402 (drive digital I/O 0x60FD/0x60FE)"
-                                                : "cia401 (CAN I/O module)") +
-          " bindings are not mapped by the CANopen master yet: bind the signal to gpio, modbus "
-          "or sim");
+          sig.where + ": plc signal '" + sig.name +
+          "': cia401 (CAN I/O module) bindings are not mapped by the CANopen master yet: bind "
+          "the signal to gpio, modbus, cia402 or sim");
     }
   }
+  drive_inputs_max_age_ = cfg.safety.missed_tpdo_streak > 0 ? cfg.safety.missed_tpdo_streak : 1;
   period_s_ = cfg.machine.period_s;
   for (std::size_t i = 0; i < 3 && i < cfg.machine.axes.size(); ++i) {
     gain_per_s_[i] = cfg.machine.axes[i].drive.gain_per_s;
@@ -465,6 +463,15 @@ void ServoLoop::logic() noexcept {
   in.drive_enable = pub_.out_drive_enable;  // last cycle's outputs (this cycle's come later)
   in.spindle_enable = pub_.out_spindle_enable;
   in.alive = true;
+  // CiA 402 0x60FD: this cycle's snapshot (read stage). A value the bus did not refresh is held
+  // while it is younger than the missed-TPDO streak the supervisor faults on, as the position
+  // is; older, or never received, it is not valid and the PLC uses the signal's default.
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    in.drive_inputs[a] = fb_.bus.axis[a].digital_inputs;
+    in.drive_inputs_valid[a] = fb_.bus.axis[a].digital_inputs_present &&
+                               drive_inputs_age_[a] < drive_inputs_max_age_;
+  }
   plc_->scan(in, plc_out_);
   const PlcRequests& rq = plc_out_.requests;
   plc_req_ = rq;
@@ -573,6 +580,11 @@ void ServoLoop::read() noexcept {
       v_est_[a] += (commanded - v_est_[a]) * lag_alpha_[a];
     }
     if (!std::isfinite(v_est_[a])) v_est_[a] = 0.0;
+    if (fb_.bus.axis[a].digital_inputs_fresh) {
+      drive_inputs_age_[a] = 0;
+    } else if (drive_inputs_age_[a] < kDriveInputsNever) {
+      ++drive_inputs_age_[a];
+    }
   }
   if (io_ != nullptr) {
     fb_.force = io_->read_force();
@@ -880,7 +892,13 @@ void ServoLoop::channels(MachineState st, AxisCommands& out) noexcept {
 
 void ServoLoop::write(const AxisCommands& out) noexcept {
   out_ = out;
-  bus_.write(out);
+  // The PLC's CiA 402 outputs (0x60FE:01), computed in this cycle's scan, written with the
+  // commands: the field sees the scan's end value only.
+  if (plc_ != nullptr) {
+    out_.digital_outputs = plc_out_.drive_outputs;
+    out_.digital_output_mask = plc_out_.drive_output_mask;
+  }
+  bus_.write(out_);
 }
 
 void ServoLoop::supervise(MachineState st, bool servo, const Eigen::Vector3d& v_ref,

@@ -427,6 +427,11 @@ class ServoLoop {
   void identify_step(MachineState st) noexcept;
   PlcEngine* plc_ = nullptr;
   PlcCycleOutput plc_out_{};
+  // Cycles since each axis' 0x60FD last came fresh (kDriveInputsNever: not yet), and the age
+  // from which it is stale (safety.missed_tpdo_streak).
+  static constexpr int kDriveInputsNever = 1 << 30;
+  std::array<int, kMaxAxes> drive_inputs_age_{kDriveInputsNever, kDriveInputsNever, kDriveInputsNever};
+  int drive_inputs_max_age_ = 3;
   PlcRequests plc_req_{};  // this cycle's requests (commands use the previous cycle's)
   PlcFault plc_engine_fault_{};
   PlcStopCause plc_cause_{};

@@ -31,7 +31,19 @@ SimBus::SimBus(const std::vector<control::FeedDriveParams>& drives,
   }
   for (auto& f : fault_) f = false;
   for (auto& d : disabled_) d = false;
+  for (auto& m : di_force_mask_) m = 0;
+  for (auto& v : di_force_values_) v = 0;
 }
+
+void SimBus::add_input_switch(int axis, int bit, double threshold_mm, bool on_above) {
+  if (axis < 0 || axis >= axes_) throw std::invalid_argument("SimBus: no axis " + std::to_string(axis));
+  if (bit < 0 || bit > 31) throw std::invalid_argument("SimBus: 0x60FD bit 0..31");
+  const auto a = static_cast<std::size_t>(axis);
+  if (switch_count_[a] >= kMaxSwitches) throw std::invalid_argument("SimBus: too many switches");
+  switches_[a][switch_count_[a]++] = Switch{bit, threshold_mm, on_above};
+}
+
+void SimBus::clear_input_switches() noexcept { switch_count_.fill(0); }
 
 void SimBus::begin_cycle() noexcept {
   // SYNC: the drives act on the command latched at the previous SYNC for one period, then latch
@@ -42,6 +54,7 @@ void SimBus::begin_cycle() noexcept {
         (mode_ == DriveMode::kEnabled && !fault_[a] && !disabled_[a]) ? latched_v_[a] : 0.0;
     drive_[a].step_velocity(v);
     latched_v_[a] = received_v_[a];
+    do_latched_[a] = do_received_[a];
   }
   if (spindle_tau_s_ > 0.0 && !spindle_stall_) {
     const double target = mode_ == DriveMode::kEnabled ? spindle_latched_rpm_ : 0.0;
@@ -81,6 +94,22 @@ void SimBus::read(BusFeedback& fb) noexcept {
       drop_tpdos_[a].fetch_sub(1, std::memory_order_relaxed);
       f.fresh = false;  // position/velocity hold their last values in the loop's snapshot
     }
+    // 0x60FD: sampled with the position (the same TPDO timing); a dropped TPDO leaves the last
+    // value, not fresh.
+    f.digital_inputs_present = true;
+    f.digital_inputs_fresh = f.fresh;
+    if (f.fresh) {
+      std::uint32_t di = 0;
+      const double x = drive_[a].position_mm();
+      for (std::size_t k = 0; k < switch_count_[a]; ++k) {
+        const Switch& sw = switches_[a][k];
+        if (sw.on_above ? x > sw.threshold_mm : x < sw.threshold_mm) di |= 1u << sw.bit;
+      }
+      const std::uint32_t m = di_force_mask_[a].load(std::memory_order_relaxed);
+      di = (di & ~m) | (di_force_values_[a].load(std::memory_order_relaxed) & m);
+      di_last_[a] = di;
+    }
+    f.digital_inputs = di_last_[a];
     f.fault = fault_[a];
     f.enabled = mode_ == DriveMode::kEnabled && !f.fault && !disabled_[a];
     f.statusword = f.fault ? 0x0008 : (f.enabled ? 0x0027 : 0x0040);
@@ -100,6 +129,7 @@ void SimBus::write(const AxisCommands& cmd) noexcept {
                                              cmd.velocity_mm_s[a], can_cpm_[a])) /
                                              can_cpm_[a]
                                        : cmd.velocity_mm_s[a];
+    do_received_[a] = cmd.digital_outputs[a] & cmd.digital_output_mask[a];
   }
   received_mode_ = cmd.mode;
   spindle_received_rpm_ = std::isfinite(cmd.spindle_rpm) ? cmd.spindle_rpm : 0.0;
@@ -149,7 +179,18 @@ std::unique_ptr<SimBus> make_sim_bus(const config::Config& cfg) {
     for (const auto& e : cfg.bus.spindle->tpdo) can_spindle_feedback = can_spindle_feedback || e.index == 0x606C;
   }
   if (cfg.spindle.type == "sim" || can_spindle_feedback) bus->configure_spindle(cfg.spindle.sim_tau_s);
+  add_default_input_switches(*bus, cfg);
   return bus;
+}
+
+void add_default_input_switches(SimBus& bus, const config::Config& cfg) {
+  for (std::size_t a = 0; a < cfg.machine.axes.size() && a < static_cast<std::size_t>(kMaxAxes); ++a) {
+    const auto& ax = cfg.machine.axes[a];
+    const int i = static_cast<int>(a);
+    bus.add_input_switch(i, 0, ax.min_mm - kSimLimitMargin_mm, false);
+    bus.add_input_switch(i, 1, ax.max_mm + kSimLimitMargin_mm, true);
+    bus.add_input_switch(i, 2, ax.min_mm + kSimHomeBand_mm, false);
+  }
 }
 
 }  // namespace contour::daemon

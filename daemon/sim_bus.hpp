@@ -55,6 +55,23 @@ class SimBus final : public AxisBus {
   // The spindle is jammed / its drive does not follow (stays at its speed).
   void inject_spindle_stall(bool on) noexcept { spindle_stall_ = on; }
   void inject_spindle_fault(bool on) noexcept { spindle_fault_ = on; }
+  // CiA 402 digital inputs 0x60FD (AxisFeedback::digital_inputs, present on every axis of this
+  // bus): switches on the plant's true position, as a cam on the axis actuates a real switch.
+  // Bit `bit` (0..31) is on while the position is above `threshold_mm` (on_above) or below it.
+  // Setup-time only (before the loop runs); at most kMaxSwitches per axis (std::invalid_argument).
+  static constexpr std::size_t kMaxSwitches = 4;
+  void add_input_switch(int axis, int bit, double threshold_mm, bool on_above);
+  void clear_input_switches() noexcept;
+  // Thread-safe override of input bits (tests, fault injection): bits in `mask` read as `values`.
+  void inject_digital_inputs(int axis, std::uint32_t mask, std::uint32_t values) noexcept {
+    di_force_mask_[static_cast<std::size_t>(axis)] = mask;
+    di_force_values_[static_cast<std::size_t>(axis)] = values;
+  }
+  // 0x60FE:01 as the drive holds it: the last write()'s outputs & mask, latched at the next SYNC
+  // (RPDO semantics). RT thread / the thread stepping the bus.
+  [[nodiscard]] std::uint32_t digital_outputs(int axis) const noexcept {
+    return do_latched_[static_cast<std::size_t>(axis)];
+  }
   // The mode of the last write() (what the RPDOs of this cycle asked for).
   [[nodiscard]] DriveMode written_mode() const noexcept { return received_mode_; }
 
@@ -79,7 +96,27 @@ class SimBus final : public AxisBus {
   bool can_velocity_mapped_ = false;
   std::array<std::int64_t, kMaxAxes> can_last_counts_{};
   bool can_have_last_ = false;
+  struct Switch {
+    int bit = 0;
+    double threshold_mm = 0.0;
+    bool on_above = true;
+  };
+  std::array<std::array<Switch, kMaxSwitches>, kMaxAxes> switches_{};
+  std::array<std::size_t, kMaxAxes> switch_count_{};
+  std::array<std::uint32_t, kMaxAxes> di_last_{};
+  std::array<std::atomic<std::uint32_t>, kMaxAxes> di_force_mask_{};
+  std::array<std::atomic<std::uint32_t>, kMaxAxes> di_force_values_{};
+  std::array<std::uint32_t, kMaxAxes> do_received_{};
+  std::array<std::uint32_t, kMaxAxes> do_latched_{};
 };
+
+// The simulated drives' default switches (make_sim_bus and the daemon's sim bus): per axis,
+// negative_limit (bit 0) below machine.axes[].min_mm - kSimLimitMargin_mm, positive_limit
+// (bit 1) above max_mm + kSimLimitMargin_mm (where the sim: plant's overtravel switches sit), and
+// home_switch (bit 2) below min_mm + kSimHomeBand_mm (homing towards the negative end).
+inline constexpr double kSimLimitMargin_mm = 2.0;
+inline constexpr double kSimHomeBand_mm = 0.5;
+void add_default_input_switches(SimBus& bus, const config::Config& cfg);
 
 // The drives of machine.axes with the loop period (delay_cycles as configured).
 std::vector<control::FeedDriveParams> sim_bus_drives(const config::Config& cfg);

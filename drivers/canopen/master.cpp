@@ -49,10 +49,26 @@ std::span<const std::uint16_t> optional_objects() noexcept { return kOptionalObj
 
 std::vector<CanFilter> master_rx_filters(const MasterConfig& cfg) {
   std::vector<CanFilter> f;
-  for (const auto& n : cfg.nodes)
+  for (const auto& n : cfg.nodes) {
     for (std::uint32_t base : {kCobEmcy, kCobTpdo[0], kCobSdoTx, kCobHeartbeat})
       f.push_back({base + n.node_id, 0x7FF});
+    if (n.digital_inputs) f.push_back({kCobTpdo[1] + n.node_id, 0x7FF});
+  }
   return f;
+}
+
+PdoMapping digital_inputs_tpdo() {
+  PdoMapping p;
+  p.entries[0] = {0x60FD, 0, 32};
+  p.count = 1;
+  return p;
+}
+
+PdoMapping digital_outputs_rpdo() {
+  PdoMapping p;
+  p.entries[0] = {0x60FE, 1, 32};
+  p.count = 1;
+  return p;
 }
 
 PdoMapping default_rpdo(DriveMode m) {
@@ -109,9 +125,19 @@ Master::Master(CanBus& bus, MasterConfig cfg, Log log_fn)
         throw StartupError(who + ": object " + hex(o.index, 4) +
                            " is mandatory for this master and cannot be skipped" + prof);
     }
+    // The digital I/O has a PDO of its own (TPDO1/RPDO1 keep their mapping: the default ones
+    // have no room for 32 more bits in 8 bytes).
+    if (n.digital_inputs && q.tpdos < 2)
+      throw StartupError(who + ": 0x60FD digital inputs (plc cia402 input binding) need TPDO2, "
+                               "the drive has 1 TPDO" + prof);
+    if (n.digital_output_mask != 0 && q.rpdos < 2)
+      throw StartupError(who + ": 0x60FE:01 digital outputs (plc cia402 output binding) need "
+                               "RPDO2, the drive has 1 RPDO" + prof);
     const int every = n.sync_every < 1 ? 1 : n.sync_every;
     frames.push_back({static_cast<int>(n.rpdo.bytes()), every});
     frames.push_back({static_cast<int>(n.tpdo.bytes()), every});
+    if (n.digital_inputs) frames.push_back({4, every});
+    if (n.digital_output_mask != 0) frames.push_back({4, every});
   }
   load_ = estimate_bus_load(frames, cfg_.bitrate, cfg_.period_us * 1e-6);
   char msg[200];
@@ -255,25 +281,55 @@ void Master::wait_boot_ups() {
                        " ms after NMT reset communication from " + missing);
 }
 
-void Master::configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m) {
+void Master::configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m, std::uint16_t k) {
   const std::uint8_t id = n.node_id;
-  const std::uint16_t comm = rx ? 0x1400 : 0x1800;
-  const std::uint16_t map = rx ? 0x1600 : 0x1A00;
-  const std::uint32_t cob = (rx ? kCobRpdo[0] : kCobTpdo[0]) + id;
+  const auto comm = static_cast<std::uint16_t>((rx ? 0x1400 : 0x1800) + k);
+  const auto map = static_cast<std::uint16_t>((rx ? 0x1600 : 0x1A00) + k);
+  const std::uint32_t cob = (rx ? kCobRpdo[k] : kCobTpdo[k]) + id;
   // CiA 301 order: disable, comm parameters, count 0, entries, count, enable.
   sdo_download_u32(id, comm, 1, 0x80000000u | cob);
   sdo_download_u8(id, comm, 2, n.sync_every);
   sdo_download_u8(id, map, 0, 0);
-  for (std::size_t k = 0; k < m.count; ++k)
-    sdo_download_u32(id, map, static_cast<std::uint8_t>(k + 1), m.entries[k].mapping_word());
+  for (std::size_t e = 0; e < m.count; ++e)
+    sdo_download_u32(id, map, static_cast<std::uint8_t>(e + 1), m.entries[e].mapping_word());
   sdo_download_u8(id, map, 0, static_cast<std::uint8_t>(m.count));
   sdo_download_u32(id, comm, 1, cob);
+}
+
+void Master::disable_pdos(const NodeSetup& n, bool rx, std::uint16_t from) {
   // The drive's other PDOs off, so that only the configured traffic is on the bus (a drive with
   // one PDO per direction has no 0x1401/0x1801: nothing to switch off).
+  const std::uint8_t id = n.node_id;
+  const std::uint16_t comm = rx ? 0x1400 : 0x1800;
   const std::uint16_t have = rx ? n.quirks.rpdos : n.quirks.tpdos;
-  for (std::uint16_t k = 1; k < have && k < 4; ++k)
+  for (std::uint16_t k = from; k < have && k < 4; ++k)
     sdo_download_u32(id, static_cast<std::uint16_t>(comm + k), 1,
                      0x80000000u | ((rx ? kCobRpdo[k] : kCobTpdo[k]) + id));
+}
+
+// The objects of the digital I/O, checked before they are mapped: a drive that lacks them would
+// otherwise fail in the middle of the PDO mapping with an abort on 0x1A01 that names neither
+// the object nor why it is wanted.
+void Master::check_digital_io(const NodeSetup& n) {
+  const std::string who = node_label(n.node_id);
+  auto need = [&](std::uint16_t index, std::uint8_t sub, const char* what) {
+    try {
+      sdo_upload(n.node_id, index, sub);
+    } catch (const SdoAbortError& e) {
+      if (!e.from_server()) throw;
+      throw StartupError(who + ": " + object_name(index, sub) + " " + what +
+                         ": the drive does not provide it (SDO abort " + hex(e.code(), 8) + " " +
+                         sdo_abort_text(e.code()) + ")");
+    }
+  };
+  if (n.digital_inputs) need(0x60FD, 0, "digital inputs, needed by the PLC's cia402 input bindings");
+  if (n.digital_output_mask != 0) {
+    need(0x60FE, 1, "digital outputs, needed by the PLC's cia402 output bindings");
+    std::uint8_t b[4];
+    put_u32(b, n.digital_output_mask);
+    if (!optional_download(n, 0x60FE, 2, b))
+      log(who + ": 0x60FE:02 (output mask) not written: the drive drives 0x60FE:01 as sent");
+  }
 }
 
 namespace {
@@ -398,8 +454,13 @@ void Master::configure_node(const NodeSetup& n) {
     throw StartupError(who + ": mode not confirmed: 0x6061 = " +
                        (disp.empty() ? std::string("?") : std::to_string(static_cast<std::int8_t>(disp[0]))) +
                        " after writing 0x6060 = " + std::to_string(static_cast<int>(n.mode)));
+  check_digital_io(n);
   configure_pdo(n, true, n.rpdo);
+  if (n.digital_output_mask != 0) configure_pdo(n, true, digital_outputs_rpdo(), 1);
+  disable_pdos(n, true, n.digital_output_mask != 0 ? 2 : 1);
   configure_pdo(n, false, n.tpdo);
+  if (n.digital_inputs) configure_pdo(n, false, digital_inputs_tpdo(), 1);
+  disable_pdos(n, false, n.digital_inputs ? 2 : 1);
 }
 
 void Master::start_up() {
@@ -481,6 +542,21 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
     ++r.tpdo_received;
     return;
   }
+  if (std::uint8_t n = node_of(id, kCobTpdo[1]); n != 0 && index_of(n) >= 0 &&
+      cfg_.nodes[static_cast<std::size_t>(index_of(n))].digital_inputs) {
+    if (f.dlc != 4) {
+      ++counters_.malformed_frames;
+      return;
+    }
+    if (!in_cycle) {
+      ++counters_.late_or_stray_frames;
+      return;
+    }
+    auto& r = rt_[static_cast<std::size_t>(index_of(n))];
+    r.digital_inputs = get_u32(f.data.data());
+    r.digital_inputs_fresh = true;
+    return;
+  }
   if (std::uint8_t n = node_of(id, kCobHeartbeat); n != 0 && index_of(n) >= 0) {
     const auto i = static_cast<std::size_t>(index_of(n));
     const auto st = decode_heartbeat(f);
@@ -538,7 +614,10 @@ CycleStatus Master::begin_cycle(std::int64_t now_ns) noexcept {
   // so the SYNC below starts a clean collection window.
   CanFrame f;
   while (bus_.receive(f)) dispatch(f, false);
-  for (auto& r : rt_) r.tpdo_fresh = false;
+  for (auto& r : rt_) {
+    r.tpdo_fresh = false;
+    r.digital_inputs_fresh = false;
+  }
   sync_mono_ns_ = mono_ns();
   const SendResult s = bus_.send(sync_frame());
   if (s == SendResult::kDropped) ++counters_.tx_dropped;
@@ -567,7 +646,9 @@ CycleStatus Master::collect() noexcept {
   };
   auto all_in = [&] {
     for (std::size_t i = 0; i < rt_.size(); ++i)
-      if (expected(i) && !rt_[i].tpdo_fresh) return false;
+      if (expected(i) && (!rt_[i].tpdo_fresh ||
+                          (cfg_.nodes[i].digital_inputs && !rt_[i].digital_inputs_fresh)))
+        return false;
     return true;
   };
   CanFrame f;
@@ -591,6 +672,7 @@ CycleStatus Master::collect() noexcept {
         ++r.missed_streak;
         ++r.missed_total;
       }
+      if (n.digital_inputs && !r.digital_inputs_fresh) ++r.digital_inputs_missed;
     }
     if (r.missed_streak >= static_cast<std::uint32_t>(cfg_.missed_tpdo_fault) &&
         (r.faults & static_cast<std::uint8_t>(NodeFault::kTpdoMissed)) == 0) {
@@ -637,6 +719,15 @@ CycleStatus Master::send_rpdos() noexcept {
     const SendResult s = bus_.send(f);
     if (s == SendResult::kDropped) ++counters_.tx_dropped;
     if (s == SendResult::kError) err = true;
+    if (n.digital_output_mask != 0) {
+      CanFrame o;
+      o.id = kCobRpdo[1] + n.node_id;
+      o.dlc = 4;
+      put_u32(o.data.data(), r.digital_outputs & n.digital_output_mask);
+      const SendResult so = bus_.send(o);
+      if (so == SendResult::kDropped) ++counters_.tx_dropped;
+      if (so == SendResult::kError) err = true;
+    }
   }
   if (fault_reset_) {
     // Operator reset in progress: a drive that has left Fault clears its drive-fault latch (it may

@@ -88,6 +88,15 @@ struct NodeSetup {
   PdoMapping rpdo;  // RPDO1, must contain 0x6040
   PdoMapping tpdo;  // TPDO1, must contain 0x6041
   DriveQuirks quirks;
+  // CiA 402 digital I/O (the PLC's cia402 bindings). `digital_inputs`: 0x60FD:00 (32 bits) is
+  // mapped alone into TPDO2 (COB-ID 0x280 + node-id, same transmission type as TPDO1).
+  // `digital_output_mask` != 0: 0x60FE:01 (32 bits) alone into RPDO2 (0x300 + node-id), and the
+  // mask written to 0x60FE:02 at start-up (the drive drives only these bits). Both off (the
+  // default): TPDO2/RPDO2 stay disabled and the node's traffic is what it was without them.
+  // A drive with one PDO per direction, or without the object, is refused at start-up (the
+  // constructor / start_up() name the node and the object).
+  bool digital_inputs = false;
+  std::uint32_t digital_output_mask = 0;
 };
 
 struct MasterConfig {
@@ -172,6 +181,11 @@ struct NodeRuntime {
   std::int32_t target = 0;  // CSV/PV: counts/s; CSP: counts
   std::uint16_t controlword = 0;
   bool tpdo_fresh = false;
+  // NodeSetup::digital_inputs: 0x60FD as last received (TPDO2), and whether it came this cycle.
+  std::uint32_t digital_inputs = 0;
+  bool digital_inputs_fresh = false;
+  std::uint64_t digital_inputs_missed = 0;  // cycles TPDO2 was due and did not come
+  std::uint32_t digital_outputs = 0;        // 0x60FE:01 sent in RPDO2 (masked)
 };
 
 struct MasterCounters {
@@ -218,6 +232,10 @@ class Master {
   void set_request_all(DriveRequest r) noexcept;
   void quick_stop_all() noexcept { set_request_all(DriveRequest::kQuickStop); }
   void set_target(std::size_t i, std::int32_t v) noexcept { rt_[i].target = v; }
+  // 0x60FE:01 for the next RPDO2 (NodeSetup::digital_output_mask bits only; others sent as 0).
+  void set_digital_outputs(std::size_t i, std::uint32_t v) noexcept {
+    rt_[i].digital_outputs = v & cfg_.nodes[i].digital_output_mask;
+  }
   // Test hook (HIL): stop/resume the master's own heartbeat (the drives consume it, 0x1016), to
   // prove the drives' reaction to a dead master without killing the process. RT-safe.
   void set_heartbeat_producer(bool on) noexcept { heartbeat_on_ = on; }
@@ -242,7 +260,10 @@ class Master {
   void dispatch(const CanFrame& f, bool in_cycle) noexcept;
   void push_event(const MasterEvent& e) noexcept;
   void configure_node(const NodeSetup& n);
-  void configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m);
+  // PDO `k` (0: PDO1) of a direction; then disable_pdos() switches off those from `from` on.
+  void configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m, std::uint16_t k = 0);
+  void disable_pdos(const NodeSetup& n, bool rx, std::uint16_t from);
+  void check_digital_io(const NodeSetup& n);
   // Optional object write/read: skipped when the quirks list it; a 0x06020000/0x06090011 abort
   // from the drive is logged and skipped. Returns whether the transfer happened.
   bool optional_download(const NodeSetup& n, std::uint16_t index, std::uint8_t sub,
@@ -284,5 +305,9 @@ std::vector<CanFilter> master_rx_filters(const MasterConfig& cfg);
 // The default leanest mappings (issue 7): RPDO {0x6040, 0x60FF|0x607A}, TPDO {0x6041, 0x6064}.
 PdoMapping default_rpdo(DriveMode m);
 PdoMapping default_tpdo();
+// The digital I/O PDOs of NodeSetup::digital_inputs / digital_output_mask: TPDO2 {0x60FD:00},
+// RPDO2 {0x60FE:01}.
+PdoMapping digital_inputs_tpdo();
+PdoMapping digital_outputs_rpdo();
 
 }  // namespace contour::drivers::canopen

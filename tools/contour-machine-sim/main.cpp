@@ -3,6 +3,10 @@
 // Quirks (drives that are not a complete CiA 301/402 drive, sim_drive.hpp SimQuirks):
 // --missing-object NODE:INDEX[:SUB], --pdos NODE:COUNT[:MAX_ENTRIES], --expedited-only NODE,
 // --tpdo-sampling NODE:sync|after_step (default: the node's drive profile, bus.*.profile).
+// CiA 402 digital inputs 0x60FD (sim_drive.hpp InputSwitch): every axis drive has negative_limit,
+// positive_limit and home_switch switches at its soft limits; --input-switch
+// NODE:BIT:above|below:POS_MM adds one (bit on while the position is above/below POS_MM).
+// 0x60FE:01 (digital outputs) is stored and readable over SDO.
 // The simulated machine for HIL: one process answering every bus node of the config (axes from
 // machine.axes[].node_id, the spindle from bus.spindle.node_id) as CiA 402 drives on SocketCAN,
 // advancing one plant step per SYNC (lockstep). Prints "ready: ..." on stdout once listening and a
@@ -80,6 +84,9 @@ int main(int argc, char** argv) {
   app.add_option("--sdo-abort", sdo_abort, "NODE:INDEX:SUB[:CODE] answer this object with an abort");
   app.add_option("--drop-sdo", drop_sdo, "NODE:COUNT ignore the node's first COUNT SDO requests");
   app.add_option("--malformed", malformed, "NODE:SYNC send malformed frames at this SYNC");
+  std::vector<std::string> input_switch;
+  app.add_option("--input-switch", input_switch,
+                 "NODE:BIT:above|below:POS_MM a 0x60FD switch on the axis at POS_MM");
   app.add_option("--missing-object", missing_obj,
                  "NODE:INDEX[:SUB] the node's object dictionary lacks this object (every "
                  "sub-index without SUB); SDO access is aborted 0x06020000 / 0x06090011");
@@ -235,6 +242,10 @@ int main(int argc, char** argv) {
       s.plant = ax.drive;
       s.plant.period_s = cfg.machine.period_s;
       // delay_cycles is reduced below by the CAN transport's period (TPDO sampled at SYNC).
+      // The same switches as the in-process sim bus (daemon/sim_bus.hpp defaults).
+      s.switches.push_back({0, ax.min_mm - 2.0, false});
+      s.switches.push_back({1, ax.max_mm + 2.0, true});
+      s.switches.push_back({2, ax.min_mm + 0.5, false});
     }
     if (s.spindle) {
       s.counts_per_mm = 4096.0;  // counts per revolution
@@ -300,6 +311,23 @@ int main(int argc, char** argv) {
       if (v.size() > 2) s.quirks.pdo_max_entries = static_cast<int>(v[2]);
     }
     for (long n : expedited_only) find(n).quirks.expedited_only = true;
+    for (const auto& d : input_switch) {
+      // NODE:BIT:above|below:POS_MM (the position is a decimal, not parse_tuple's integer).
+      const auto c1 = d.find(':');
+      const auto c2 = c1 == std::string::npos ? c1 : d.find(':', c1 + 1);
+      const auto c3 = c2 == std::string::npos ? c2 : d.find(':', c2 + 1);
+      if (c3 == std::string::npos)
+        throw CLI::ValidationError("--input-switch", "expected NODE:BIT:above|below:POS_MM, got '" + d + "'");
+      const auto v = parse_tuple(d.substr(0, c2), 2, 2, "--input-switch");
+      const std::string side = d.substr(c2 + 1, c3 - c2 - 1);
+      char* end = nullptr;
+      const std::string pos = d.substr(c3 + 1);
+      const double x = std::strtod(pos.c_str(), &end);
+      if (v[1] < 0 || v[1] > 31 || (side != "above" && side != "below") || pos.empty() ||
+          *end != '\0' || !std::isfinite(x))
+        throw CLI::ValidationError("--input-switch", "expected NODE:BIT(0..31):above|below:POS_MM, got '" + d + "'");
+      find(v[0]).switches.push_back({static_cast<int>(v[1]), x, side == "above"});
+    }
     for (const auto& d : tpdo_sampling) {
       const auto colon = d.find(':');
       const std::string word = colon == std::string::npos ? "" : d.substr(colon + 1);
@@ -334,6 +362,7 @@ int main(int argc, char** argv) {
         {0x000, 0x7FF}, {0x080, 0x7FF}, {0x700, 0x780}};
     for (const auto& s : setups) {
       filters.push_back({0x200u + s.node_id, 0x7FF});
+      filters.push_back({0x300u + s.node_id, 0x7FF});  // RPDO2: 0x60FE:01 (drive digital outputs)
       filters.push_back({0x600u + s.node_id, 0x7FF});
     }
     bus = std::make_unique<contour::drivers::SocketCan>(iface, filters);

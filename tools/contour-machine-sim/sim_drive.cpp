@@ -17,9 +17,13 @@ std::vector<std::uint8_t> le(std::int64_t v, std::size_t n) {
   for (std::size_t i = 0; i < n; ++i) out[i] = static_cast<std::uint8_t>((static_cast<std::uint64_t>(v) >> (8 * i)) & 0xFF);
   return out;
 }
-bool rx_mappable(std::uint16_t i) { return i == 0x6040 || i == 0x607A || i == 0x60FF || i == 0x6060; }
-bool tx_mappable(std::uint16_t i) {
-  return i == 0x6041 || i == 0x6064 || i == 0x606C || i == 0x6061 || i == 0x603F;
+bool rx_mappable(std::uint16_t i, std::uint8_t sub) {
+  if (i == 0x60FE) return sub == 1;  // digital outputs, physical outputs
+  return sub == 0 && (i == 0x6040 || i == 0x607A || i == 0x60FF || i == 0x6060);
+}
+bool tx_mappable(std::uint16_t i, std::uint8_t sub) {
+  return sub == 0 &&
+         (i == 0x6041 || i == 0x6064 || i == 0x606C || i == 0x6061 || i == 0x603F || i == 0x60FD);
 }
 }  // namespace
 
@@ -87,6 +91,12 @@ void SimDrive::build_od() {
   rw(0x607A, 0, 0, 4);
   rw(0x60FF, 0, 0, 4);
   rw(0x6085, 0, 1000000, 4);
+  // CiA 402 digital inputs (limit/home switches, SimDriveSetup::switches) and outputs: 0x60FE:01
+  // is what the master drives, :02 the mask of the bits it may drive (stored as written).
+  ro(0x60FD, 0, 0, 4);
+  ro(0x60FE, 0, 2, 1);
+  rw(0x60FE, 1, 0, 4);
+  rw(0x60FE, 2, 0, 4);
   ro(0x60C2, 0, 2, 1);
   rw(0x60C2, 1, 1, 1);
   rw(0x60C2, 2, -3, 1);
@@ -145,6 +155,7 @@ void SimDrive::reset_communication() {
   master_hb_armed_ = false;
   syncs_ = 0;
   rx_latched_ = false;
+  rx_do_.reset();
   seg_upload_ = seg_download_ = false;
   storm_drop_left_ = 0;  // a rebooted communication layer forgets injected PDO/heartbeat gaps
   hb_gap_left_ = 0;
@@ -253,21 +264,28 @@ void SimDrive::on_frame(const CanFrame& f) {
     on_sdo(f);
     return;
   }
-  if (f.id == co::kCobRpdo[0] + s_.node_id && nmt_ == co::NmtState::kOperational) on_rpdo(f);
+  if (nmt_ != co::NmtState::kOperational) return;
+  const auto pdos = static_cast<std::uint16_t>(std::clamp(s_.quirks.pdos, 1, 4));
+  for (std::uint16_t k = 0; k < pdos; ++k) {
+    const std::uint32_t cob = u32(static_cast<std::uint16_t>(0x1400 + k), 1);
+    if ((cob & 0x80000000u) == 0 && f.id == (cob & 0x7FF)) {
+      on_rpdo(f, k);
+      return;
+    }
+  }
 }
 
-co::PdoMapping SimDrive::mapping(bool rx) const {
+co::PdoMapping SimDrive::mapping(bool rx, std::uint16_t pdo) const {
   co::PdoMapping m;
-  const std::uint16_t mi = rx ? 0x1600 : 0x1A00;
+  const auto mi = static_cast<std::uint16_t>((rx ? 0x1600 : 0x1A00) + pdo);
   m.count = static_cast<std::size_t>(std::min<std::int64_t>(8, read_int(mi, 0) & 0xFF));
   for (std::size_t k = 0; k < m.count; ++k)
     m.entries[k] = co::PdoEntry::from_word(u32(mi, static_cast<std::uint8_t>(k + 1)));
   return m;
 }
 
-void SimDrive::on_rpdo(const CanFrame& f) {
-  if ((u32(0x1400, 1) & 0x80000000u) != 0) return;
-  const auto m = mapping(true);
+void SimDrive::on_rpdo(const CanFrame& f, std::uint16_t pdo) {
+  const auto m = mapping(true, pdo);
   co::PdoValues v{};
   if (f.dlc < m.bytes() || !co::unpack_pdo(m, f, v)) {
     // CiA 301: a too-short RPDO is not processed; the drive reports 0x8210.
@@ -282,8 +300,10 @@ void SimDrive::on_rpdo(const CanFrame& f) {
     if (idx == 0x6040) rx_cw_ = static_cast<std::uint16_t>(v[k]);
     else if (idx == 0x60FF || idx == 0x607A) rx_target_ = co::as_i32(v[k]);
     else if (idx == 0x6060) set_int(0x6060, 0, static_cast<std::int8_t>(v[k] & 0xFF));
+    else if (idx == 0x60FE) rx_do_ = static_cast<std::uint32_t>(v[k] & 0xFFFFFFFF);
   }
-  rx_latched_ = true;
+  // RPDO1 carries the controlword: only it latches the drive's command.
+  if (m.find(0x6040) >= 0) rx_latched_ = true;
 }
 
 void SimDrive::raise_fault(std::uint16_t code) {
@@ -338,6 +358,14 @@ void SimDrive::sample_and_transmit() {
   std::uint16_t sw = co::statusword_for(state_);
   if (state_ == co::Cia402State::kOperationEnabled) sw |= 0x1000;  // follows the command
   set_int(0x6041, 0, sw);
+  if (!s_.spindle) {
+    std::uint32_t di = 0;
+    const double x = plant_.position_mm();
+    for (const auto& w : s_.switches)
+      if (w.bit >= 0 && w.bit < 32 && (w.on_above ? x > w.threshold_mm : x < w.threshold_mm))
+        di |= 1u << w.bit;
+    set_int(0x60FD, 0, di);
+  }
   const auto tx_type = read_int(0x1800, 2) & 0xFF;
   const bool tx_valid = (u32(0x1800, 1) & 0x80000000u) == 0;
   const bool dropping = fl.drop_tpdo_from >= 0 && syncs_ >= fl.drop_tpdo_from &&
@@ -354,13 +382,24 @@ void SimDrive::sample_and_transmit() {
   }
   if (withheld) ++tpdo_dropped_;
   if (tx_due && !withheld) {
-    const auto m = mapping(false);
-    co::PdoValues v{};
-    for (std::size_t k = 0; k < m.count; ++k) v[k] = read_int(m.entries[k].index, m.entries[k].sub);
-    CanFrame f;
-    f.id = u32(0x1800, 1) & 0x7FF;
-    co::pack_pdo(m, v, f);
-    send_(f);
+    // TPDO1, then the other valid TPDOs of this transmission type (the master's TPDO2: 0x60FD);
+    // a withheld SYNC withholds them all (one missed TPDO for the master).
+    const auto pdos = static_cast<std::uint16_t>(std::clamp(s_.quirks.pdos, 1, 4));
+    for (std::uint16_t p = 0; p < pdos; ++p) {
+      const auto comm = static_cast<std::uint16_t>(0x1800 + p);
+      if ((u32(comm, 1) & 0x80000000u) != 0) continue;
+      if (p > 0) {
+        const auto t = read_int(comm, 2) & 0xFF;
+        if (t < 1 || t > 240 || syncs_ % t != 0) continue;
+      }
+      const auto m = mapping(false, p);
+      co::PdoValues v{};
+      for (std::size_t k = 0; k < m.count; ++k) v[k] = read_int(m.entries[k].index, m.entries[k].sub);
+      CanFrame f;
+      f.id = u32(comm, 1) & 0x7FF;
+      co::pack_pdo(m, v, f);
+      send_(f);
+    }
   }
   if (fl.malformed_at >= 0 && syncs_ == fl.malformed_at) {
     CanFrame f;
@@ -405,6 +444,10 @@ void SimDrive::apply_and_step() {
   cw_ = cw;
   rx_latched_ = false;
   set_int(0x6040, 0, cw);
+  if (rx_do_) {
+    set_int(0x60FE, 1, *rx_do_);
+    rx_do_.reset();
+  }
   const double T = s_.period_s;
   const double decel_mm_s2 =
       static_cast<double>(read_int_or(0x6085, 0, 1000000) & 0xFFFFFFFF) / s_.counts_per_mm;
@@ -480,7 +523,7 @@ bool SimDrive::pdo_mapping_ok(bool rx, std::uint8_t count, std::uint16_t map_ind
   int bits = 0;
   for (std::uint8_t k = 1; k <= count; ++k) {
     const auto e = co::PdoEntry::from_word(u32(map_index, k));
-    if (!(rx ? rx_mappable(e.index) : tx_mappable(e.index)) || e.sub != 0) {
+    if (!(rx ? rx_mappable(e.index, e.sub) : tx_mappable(e.index, e.sub))) {
       code = od_.count(key(e.index, e.sub)) != 0 ? 0x06040041 : 0x06020000;
       return false;
     }

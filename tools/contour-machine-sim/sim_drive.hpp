@@ -67,6 +67,16 @@ struct SimQuirks {
   bool wall_clock_consumer = false;
 };
 
+// A switch on the axis (a cam on the carriage): bit `bit` of 0x60FD is on while the plant's
+// position is above `threshold_mm` (on_above) or below it. Defaults (main.cpp): negative_limit
+// (bit 0) below machine.axes[].min_mm - 2 mm, positive_limit (1) above max_mm + 2 mm, home_switch
+// (2) below min_mm + 0.5 mm, as the in-process SimBus; --input-switch adds more.
+struct InputSwitch {
+  int bit = 0;
+  double threshold_mm = 0.0;
+  bool on_above = true;
+};
+
 struct SimDriveSetup {
   std::uint8_t node_id = 1;
   std::string name = "X";
@@ -81,6 +91,7 @@ struct SimDriveSetup {
   std::uint32_t serial = 0;
   SimFaults faults;
   SimQuirks quirks;
+  std::vector<InputSwitch> switches;  // 0x60FD, sampled with the TPDOs
 };
 
 class SimDrive {
@@ -101,6 +112,9 @@ class SimDrive {
   [[nodiscard]] double spindle_rpm() const { return spindle_rpm_; }
   [[nodiscard]] bool is_spindle() const { return s_.spindle; }
   [[nodiscard]] long syncs() const { return syncs_; }
+  // 0x60FD as last sampled; 0x60FE:01 as last written (RPDO2 at SYNC, or SDO).
+  [[nodiscard]] std::uint32_t digital_inputs() const { return u32(0x60FD, 0); }
+  [[nodiscard]] std::uint32_t digital_outputs() const { return u32(0x60FE, 1); }
 
   // Re-armable fault injection (contour-machine-sim --storm, storm.hpp). Each call is one event
   // and may be repeated any time after the previous one; all act on SYNC (lockstep).
@@ -132,7 +146,7 @@ class SimDrive {
   void apply_and_step();       // RPDO latched since the previous SYNC, CiA 402, plant step
   std::int64_t read_int_or(std::uint16_t index, std::uint8_t sub, std::int64_t fixed) const;
   void on_sdo(const drivers::CanFrame& f);
-  void on_rpdo(const drivers::CanFrame& f);
+  void on_rpdo(const drivers::CanFrame& f, std::uint16_t k);
   std::optional<std::uint32_t> write_object(std::uint16_t index, std::uint8_t sub,
                                             const std::vector<std::uint8_t>& data);
   std::uint32_t u32(std::uint16_t index, std::uint8_t sub) const;
@@ -140,7 +154,7 @@ class SimDrive {
   void set_int(std::uint16_t index, std::uint8_t sub, std::int64_t v);
   Entry* find(std::uint16_t index, std::uint8_t sub);
   bool pdo_mapping_ok(bool rx, std::uint8_t count, std::uint16_t map_index, std::uint32_t& abort) const;
-  drivers::canopen::PdoMapping mapping(bool rx) const;
+  drivers::canopen::PdoMapping mapping(bool rx, std::uint16_t k = 0) const;
   void send_sdo(std::uint8_t cs, std::uint16_t index, std::uint8_t sub, const std::uint8_t* d, std::size_t n);
   void abort(std::uint16_t index, std::uint8_t sub, std::uint32_t code);
   void raise_fault(std::uint16_t code);
@@ -161,6 +175,7 @@ class SimDrive {
   std::int32_t rx_target_ = 0;
   bool rx_latched_ = false;
   std::uint16_t rx_cw_ = 0;
+  std::optional<std::uint32_t> rx_do_;  // 0x60FE:01 received in an RPDO, applied at SYNC
   long syncs_ = 0;
   long motion_started_at_ = -1;  // SYNC count of the first non-zero target applied
   long sdo_dropped_ = 0;         // SDO requests ignored so far (SimFaults::drop_sdo_requests)
