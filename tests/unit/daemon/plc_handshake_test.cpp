@@ -168,18 +168,18 @@ TEST(PlcHandshake, AUserMcodeNoPlcProgramHandlesPassesAtOnce) {
 
 // A signal bound to a drive's digital inputs (0x60FD) or a CiA 401 module would sit at its
 // default: no bus maps those objects yet. Start-up refuses it, naming the signal.
-TEST(PlcHandshake, DriveAndCia401BindingsAreRefusedUntilTheBusMapsThem) {
+TEST(PlcHandshake, Cia401BindingsAreRefusedUntilTheBusMapsThem) {
   config::Config cfg = sim_plc();
   ASSERT_FALSE(cfg.plc.signals.empty());
-  cfg.plc.signals[0].binding.kind = config::PlcBindingKind::kCia402;
+  cfg.plc.signals[0].binding.kind = config::PlcBindingKind::kCia401;
   SimBus bus(test_rig::drives(cfg));
   try {
     ServoLoop loop(cfg, bus);
-    FAIL() << "accepted a cia402 binding";
+    FAIL() << "accepted a cia401 binding";
   } catch (const std::invalid_argument& e) {
     const std::string what = e.what();
     EXPECT_NE(what.find("'" + cfg.plc.signals[0].name + "'"), std::string::npos) << what;
-    EXPECT_NE(what.find("cia402"), std::string::npos) << what;
+    EXPECT_NE(what.find("cia401"), std::string::npos) << what;
   }
 }
 
