@@ -400,8 +400,13 @@ ListItem axis_item(const YamlText& y, std::size_t index) {
     if (!blank_or_comment(y.line(i))) it.end = i + 1;
   }
   const std::string& l = y.line(it.line);
-  it.key_indent = static_cast<int>(l.find_first_not_of(' ', static_cast<std::size_t>(ab.child_indent) + 1));
-  if (l[static_cast<std::size_t>(it.key_indent)] == '{') {
+  const std::size_t key_col = l.find_first_not_of(' ', static_cast<std::size_t>(ab.child_indent) + 1);
+  if (key_col == std::string::npos || l[key_col] == '#') {
+    y.fail(it.line, "machine.axes item with its keys on the following lines: edit it by hand, or "
+                    "use --no-identified");
+  }
+  it.key_indent = static_cast<int>(key_col);
+  if (l[key_col] == '{') {
     y.fail(it.line, "machine.axes item in flow style ('- {...}'): write it as a block mapping to save "
                     "a drive model, or use --no-identified");
   }
