@@ -566,9 +566,9 @@ json Daemon::cmd_jog(const json& req, const ClientInfo& client) {
                        ax.name + " [" + std::to_string(lim.min_mm[a]) + ", " +
                        std::to_string(lim.max_mm[a]) + "]");
   }
-  // Incremental jogs have no owner; a continuous one belongs to this connection until it ends.
-  jog_owner_.store(continuous ? client.id : 0);
-  jog_renewed_ns_.store(std::chrono::steady_clock::now().time_since_epoch().count());
+  // Incremental jogs have no owner; a continuous one belongs to this connection from the cycle
+  // the loop jogs until the jog ends.
+  jog_owner_.store(0);
   loop_->post({CommandKind::kJog, axis, v / 60.0, d});
   if (continuous) {
     // Reply only once the loop jogs: a client that disconnects right after the reply must find a
@@ -578,11 +578,11 @@ json Daemon::cmd_jog(const json& req, const ClientInfo& client) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
     if (!loop_->status().jogging) {
-      jog_owner_.store(0);
       throw CommandError("jog refused by the loop (state " +
                          std::string(to_string(loop_->status().state)) + ")");
     }
     jog_renewed_ns_.store(std::chrono::steady_clock::now().time_since_epoch().count());
+    jog_owner_.store(client.id);
     spdlog::info("continuous jog {} {} at {} mm/min by client {} (pid {}): dead-man {} ms", ax.name,
                  req.at("continuous").get<std::string>(), v, client.id, client.pid,
                  cfg_.safety.jog_deadman_ms);

@@ -280,11 +280,10 @@ void Daemon::check_jog_deadman() {
   const std::uint64_t owner = jog_owner_.load();
   if (owner == 0) return;
   if (!loop_->status().jogging) {
-    // Ended (soft limit, `stop`, a state change): the connection owns nothing any more. A new
-    // jog sets the owner again.
+    // Ended (soft limit, `stop`, a state change): the connection owns nothing any more (the owner
+    // is set only once the loop jogs).
     std::uint64_t o = owner;
-    const auto age = std::chrono::steady_clock::now().time_since_epoch().count() - jog_renewed_ns_.load();
-    if (age > 200'000'000) jog_owner_.compare_exchange_strong(o, 0);  // past the loop's start
+    jog_owner_.compare_exchange_strong(o, 0);
     return;
   }
   const auto age_ns = std::chrono::steady_clock::now().time_since_epoch().count() - jog_renewed_ns_.load();

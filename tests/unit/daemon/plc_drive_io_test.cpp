@@ -152,15 +152,22 @@ bool refused(const Rig& r, CommandKind k, std::size_t from) {
   return false;
 }
 
-TEST(PlcDriveIo, ACamOnTheDriveInputHoldsTheProgram) {
-  IoRig p;
-  Rig& r = p.rig;
-  r.bus.add_input_switch(0, 16, 5.0, true);
-  ASSERT_TRUE(r.enable());
+// Enables the rig and starts `G1 X20 F600` (RUNNING when it worked: the caller asserts it). The
+// job must outlive the run.
+std::shared_ptr<ProgramJob> run_x20(Rig& r) {
+  EXPECT_TRUE(r.enable());
   auto job = r.load("G1 X20 F600\nM2\n", 1);
   r.step(5);
   r.loop.post({CommandKind::kRun});
   r.step(2);
+  return job;
+}
+
+TEST(PlcDriveIo, ACamOnTheDriveInputHoldsTheProgram) {
+  IoRig p;
+  Rig& r = p.rig;
+  r.bus.add_input_switch(0, 16, 5.0, true);
+  auto job = run_x20(r);
   ASSERT_EQ(r.loop.status().state, MachineState::kRunning);
   for (int i = 0; i < 2000 && r.loop.status().state == MachineState::kRunning; ++i) {
     r.step(1);
@@ -181,11 +188,7 @@ TEST(PlcDriveIo, PositiveLimitFaultsTheAxisLightsTheLampAndBlocksTheReset) {
   IoRig p;
   Rig& r = p.rig;
   r.bus.add_input_switch(0, 1, 8.0, true);
-  ASSERT_TRUE(r.enable());
-  auto job = r.load("G1 X20 F600\nM2\n", 1);
-  r.step(5);
-  r.loop.post({CommandKind::kRun});
-  r.step(2);
+  auto job = run_x20(r);
   ASSERT_EQ(r.loop.status().state, MachineState::kRunning);
   for (int i = 0; i < 3000 && r.loop.status().state == MachineState::kRunning; ++i) r.step(1);
   auto st = r.loop.status();
