@@ -13,6 +13,18 @@ if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU" AND CMAKE_CXX_COMPILER_VERSION VERSION_L
   target_compile_options(contour_warnings INTERFACE $<$<CONFIG:Release>:-Wno-restrict>)
 endif()
 
+# The compile settings every test program shares. Test sources get line tables only (-g1) in the
+# build types with debug info: enough for a backtrace and an ASan report, and a quarter less
+# compile time for the gtest-heavy sources (measured: 12 test sources at -j2, 56 s with -g, 43 s
+# with -g1); the libraries and tools keep the full -g. (A shared precompiled header was tried:
+# its 270 MB .gch made -j2 builds slower, 48-54 s against 32-37 s.)
+function(contour_test_compile_settings tgt)
+  target_include_directories(${tgt} PRIVATE ${PROJECT_SOURCE_DIR})
+  target_compile_definitions(${tgt} PRIVATE CONTOUR_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
+                             CONTOUR_BINARY_DIR="${PROJECT_BINARY_DIR}")
+  target_compile_options(${tgt} PRIVATE $<$<CONFIG:Debug,RelWithDebInfo>:-g1>)
+endfunction()
+
 # contour_add_gtests(LABEL <label> LIBS <libs...> SOURCES <files...>)
 # One executable per test source; tests are discovered at ctest time and carry the label.
 # Target tests_<label> builds every test program of that label (and nothing else), so a build
@@ -32,9 +44,7 @@ function(contour_add_gtests)
     add_dependencies(tests_${A_LABEL} ${tgt})
     target_link_libraries(${tgt} PRIVATE ${A_LIBS} GTest::gtest GTest::gmock GTest::gtest_main
                           contour::warnings)
-    target_include_directories(${tgt} PRIVATE ${PROJECT_SOURCE_DIR})
-    target_compile_definitions(${tgt} PRIVATE CONTOUR_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
-                               CONTOUR_BINARY_DIR="${PROJECT_BINARY_DIR}")
+    contour_test_compile_settings(${tgt})
     # STATE_DIRECTORY: config/sim.yaml keeps its .var there (default /tmp): tests read a
     # directory of the build tree instead, never offsets a developer's daemon left in /tmp.
     file(MAKE_DIRECTORY ${PROJECT_BINARY_DIR}/test-state)
