@@ -5,6 +5,58 @@
 
 namespace contour::config {
 
+const char* to_string(HomeConfig::Method m) noexcept {
+  switch (m) {
+    case HomeConfig::Method::kNone: return "none";
+    case HomeConfig::Method::kSwitch: return "switch";
+    case HomeConfig::Method::kAbsolute: return "absolute";
+  }
+  return "?";
+}
+
+namespace {
+
+void parse_home(Section& a, AxisConfig& ax) {
+  Section h = a.child("home");
+  HomeConfig& c = ax.home;
+  if (!h.present()) {
+    h.finish();
+    return;
+  }
+  c.present = true;
+  const std::string method = h.choice("method", "switch", {"switch", "drive", "absolute", "none"});
+  if (method == "drive") {
+    h.error("method",
+            "drive (CiA 402 homing mode 6) is not supported yet: use switch (the drive's home "
+            "input 0x60FD, searched by contourd) or absolute");
+  }
+  c.method = method == "absolute" ? HomeConfig::Method::kAbsolute
+             : method == "none"   ? HomeConfig::Method::kNone
+                                  : HomeConfig::Method::kSwitch;
+  const double vmax = ax.max_velocity_mm_min;
+  c.home_offset_mm = h.number("home_offset_mm", 0.0, -1e6, 1e6);
+  c.sequence = static_cast<int>(h.integer("sequence", 0, 0, 9));
+  c.unhomed_jog_mm_s = h.number("unhomed_jog_mm_min", 600.0, 1.0, vmax) / 60.0;
+  if (c.method == HomeConfig::Method::kSwitch) {
+    c.search_vel_mm_s = h.required_number("search_vel_mm_min", -vmax, vmax) / 60.0;
+    c.latch_vel_mm_s = h.required_number("latch_vel_mm_min", -vmax, vmax) / 60.0;
+    if (c.search_vel_mm_s == 0.0) h.error("search_vel_mm_min", "must not be 0 (its sign is the search direction)");
+    if (c.latch_vel_mm_s == 0.0) h.error("latch_vel_mm_min", "must not be 0");
+    if (std::abs(c.latch_vel_mm_s) > std::abs(c.search_vel_mm_s)) {
+      h.error("latch_vel_mm_min", "must not be faster than search_vel_mm_min");
+    }
+    const double range = ax.max_mm - ax.min_mm;
+    c.search_distance_mm = h.number("search_distance_mm", 1.2 * range, 0.001, 1e6);
+    c.home_position_mm = h.number("home_position_mm", c.home_offset_mm, ax.min_mm, ax.max_mm);
+  } else {
+    // No motion: the axis is where its encoder says (absolute) or nowhere known (none).
+    c.home_position_mm = c.home_offset_mm;
+  }
+  h.finish();
+}
+
+}  // namespace
+
 MachineConfig parse_machine(Section& s, double period_s) {
   MachineConfig m;
   m.period_s = period_s;
@@ -44,6 +96,7 @@ MachineConfig parse_machine(Section& s, double period_s) {
     ax.drive.delay_cycles =
         static_cast<int>(d.integer("delay_cycles", 1, 0, control::FeedDrive::kMaxDelay));
     ax.drive.period_s = m.period_s;
+    ax.sim_power_up_mm = d.number("power_up_mm", 0.0, -1e6, 1e6);
     d.finish();
     Section idf = a.child("identified");
     if (idf.present()) {
@@ -55,10 +108,23 @@ MachineConfig parse_machine(Section& s, double period_s) {
       ax.identified.date = idf.string("date", "");
     }
     idf.finish();
+    parse_home(a, ax);
     for (const auto& other : m.axes) {
       if (other.name == ax.name) a.error("name", "axis " + ax.name + " is defined twice");
     }
     m.axes.push_back(ax);
+  }
+  bool any_home = false;
+  for (const auto& ax : m.axes) any_home = any_home || ax.home.present;
+  m.allow_unhomed = s.boolean("allow_unhomed", !any_home);
+  if (!m.allow_unhomed) {
+    for (std::size_t i = 0; i < m.axes.size(); ++i) {
+      if (m.axes[i].home.method != HomeConfig::Method::kNone) continue;
+      axes[i].error(m.axes[i].home.present ? "home" : "name",
+                    "axis " + m.axes[i].name +
+                        " has no homing (home.method none or no home: section): give it a home "
+                        "method or set machine.allow_unhomed: true (programs then run unhomed)");
+    }
   }
   return m;
 }

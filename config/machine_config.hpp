@@ -1,5 +1,6 @@
 #pragma once
 // `machine:` section — the axes, their scaling, limits and the simulated drive behind each.
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -19,6 +20,30 @@ struct IdentifiedDrive {
   std::string date;  // free text, as written by gains save (ISO 8601 UTC)
 };
 
+// machine.axes[].home (issue 18): how the axis finds its machine zero. LinuxCNC's semantics:
+// the search runs at search_vel towards the switch (the sign is the direction); the latch moves
+// at latch_vel: with the opposite sign it backs off and latches where the switch releases, with
+// the same sign it backs off past the release and latches where the switch closes again on the
+// slow approach. The latch point becomes home_offset_mm in machine coordinates; the axis then
+// moves to home_position_mm. Axes with the same `sequence` home together, lower numbers first.
+struct HomeConfig {
+  enum class Method : std::uint8_t {
+    kNone,      // never homed: only with machine.allow_unhomed (the power-up position counts)
+    kSwitch,    // the drive's home-switch input (CiA 402 0x60FD bit 2)
+    kAbsolute,  // absolute encoder: machine position = encoder position + home_offset_mm
+  };
+  bool present = false;  // the axis has a home: section
+  Method method = Method::kNone;
+  double search_vel_mm_s = 0.0;  // signed
+  double latch_vel_mm_s = 0.0;   // signed
+  double home_offset_mm = 0.0;
+  double home_position_mm = 0.0;
+  int sequence = 0;
+  double search_distance_mm = 0.0;  // the switch must close within this travel (default 1.2 x range)
+  double unhomed_jog_mm_s = 10.0;   // jog speed limit while not homed (no soft limits then)
+};
+const char* to_string(HomeConfig::Method m) noexcept;
+
 struct AxisConfig {
   std::string name;             // "X", "Y", "Z"
   int node_id = 0;              // CANopen node-id (1..127); 0 = not on a bus
@@ -30,11 +55,21 @@ struct AxisConfig {
   // Simulated drive (contour-sim, sim bus, contour-machine-sim): seed 000 Table 1 by default.
   control::FeedDriveParams drive{};
   IdentifiedDrive identified{};  // machine.axes[].identified (optional)
+  HomeConfig home{};
+  // Simulated machine only: the true position at power-up (the incremental encoder reads 0
+  // there), so that homing has something to find.
+  double sim_power_up_mm = 0.0;
 };
 
 struct MachineConfig {
   std::vector<AxisConfig> axes;  // 1..3 linear axes, X Y Z order
   double period_s = 0.001;       // servo/interpolation period: copied from loop.period_us
+  // Programs and MDI may run with unhomed axes (LinuxCNC's NO_FORCE_HOMING): the power-up
+  // position then counts as machine position, soft limits included. Default: true only when no
+  // axis has a home: section (configs from before homing keep working); with any home: section
+  // it must be given explicitly, and an axis without homing (method none) needs it.
+  bool allow_unhomed = false;
+  [[nodiscard]] bool homing_required() const noexcept { return !allow_unhomed; }
 };
 
 // period_s comes from loop.period_us (one source of truth for the cycle time).

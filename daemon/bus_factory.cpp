@@ -18,7 +18,7 @@ std::unique_ptr<AxisBus> make_axis_bus(const config::Config& cfg, BusLog log) {
     throw std::runtime_error("bus.type '" + cfg.bus.type + "' is not supported (sim, socketcan)");
   }
   auto bus = std::make_unique<SimBus>(sim_bus_drives(cfg));
-  add_default_input_switches(*bus, cfg);  // 0x60FD limit/home switches (plc cia402 bindings)
+  configure_sim_machine(*bus, cfg);  // 0x60FD limit/home switches, power-up position
   return bus;
 }
 

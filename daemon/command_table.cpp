@@ -118,8 +118,12 @@ std::vector<CommandSpec> build_table() {
        "set an axis position (simulated machine, absolute encoders)", setpos,
        bits({S::kDisabled, S::kReady}), false, false, "DISABLED or READY, no program loaded",
        "{axis, position_mm}"});
-  add({CommandId::kHome, "home", "alias of set-position", setpos, bits({S::kDisabled, S::kReady}),
-       false, false, "DISABLED or READY, no program loaded", "{axis, position_mm}"});
+  add({CommandId::kHome, "home",
+       "home one axis, or every axis with a homing method in home.sequence order (switch search, "
+       "latch, move to home_position_mm); `stop` aborts; progress in status.homing",
+       {typed("axis", ArgType::kAxis, false, "an axis name or index", "axis name or index (absent: all)")},
+       bits({S::kReady}), false, false, "READY, no program loaded, not jogging",
+       "{homing: [axis names]}; status.homed says when each is done"});
   add({CommandId::kGains, "gains",
        "get, or set {kp, ki_per_s, kd_s, ff, cp, ci_per_s, cd_s, coupling}: validated, stability "
        "checked, swapped at a cycle boundary in any state (bumpless)",

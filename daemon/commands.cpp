@@ -83,13 +83,48 @@ json Daemon::counters_json(const LoopStatus& st) const {
   return j;
 }
 
+namespace {
+
+std::string homing_failure_text(const LoopStatus& st, const config::MachineConfig& m) {
+  std::string t;
+  switch (st.homing_failure) {
+    case 1: t = "the drive reports no digital inputs (0x60FD): no home switch"; break;
+    case 2: t = "the home switch did not close within search_distance_mm"; break;
+    case 3: t = "the home switch did not open again within search_distance_mm"; break;
+    case 4: t = "the home switch did not close again on the latch approach"; break;
+    default: t = "aborted (stop, or the machine left READY) before every axis latched"; break;
+  }
+  const auto a = static_cast<std::size_t>(st.homing_failure_axis);
+  if (st.homing_failure_axis >= 0 && a < m.axes.size()) t = m.axes[a].name + ": " + t;
+  return t;
+}
+
+}  // namespace
+
 json Daemon::status_json() {
   const auto st = loop_->status();
   const int axes = loop_->axes();
   auto& cs = loop_->stats();
   const auto& h = cs.wake_lateness;
+  json homed = json::object();
+  json phases = json::object();
+  json shifts = json::object();
+  for (int i = 0; i < axes; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    const std::string& n = cfg_.machine.axes[a].name;
+    homed[n] = (st.homed_mask >> i & 1u) != 0;
+    phases[n] = to_string(static_cast<HomingSource::Phase>(st.home_phase[a]));
+    shifts[n] = st.home_shift_mm[a];
+  }
   json j{{"state", to_string(st.state)},
          {"cause", to_string(st.cause)},
+         {"homed", homed},
+         {"homing", {{"active", st.homing},
+                     {"phase", phases},
+                     {"required", !cfg_.machine.allow_unhomed},
+                     {"runs", st.homing_runs},
+                     {"failure", st.homing_failure == 0 ? json() : json(homing_failure_text(st, cfg_.machine))},
+                     {"machine_minus_encoder_mm", shifts}}},
          {"source", to_string(st.source)},
          {"cycle", st.cycle},
          {"ref_mm", arr3(st.ref_mm, axes)},
@@ -591,6 +626,67 @@ json Daemon::cmd_jog(const json& req, const ClientInfo& client) {
   return {{"axis", ax.name}, {"target_mm", target}};
 }
 
+std::string Daemon::unhomed_axes() const {
+  if (cfg_.machine.allow_unhomed) return "";
+  const auto st = loop_->status();
+  std::string names;
+  for (std::size_t i = 0; i < cfg_.machine.axes.size(); ++i) {
+    if ((st.homed_mask >> i & 1u) != 0) continue;
+    names += (names.empty() ? "" : ", ") + cfg_.machine.axes[i].name;
+  }
+  return names;
+}
+
+void Daemon::require_homed(const char* what) const {
+  const std::string names = unhomed_axes();
+  if (names.empty()) return;
+  throw CommandError(std::string(what) + ": not homed: " + names +
+                     " (home the machine first: contourctl home --all; or set "
+                     "machine.allow_unhomed: true)");
+}
+
+json Daemon::cmd_home(const json& req) {
+  const auto st = loop_->status();
+  if (st.state != MachineState::kReady) {
+    throw CommandError("home is not allowed in state " + std::string(to_string(st.state)) + " (needs READY)");
+  }
+  if (st.attached_job != 0) throw CommandError("home: not while a program is loaded (stop it first)");
+  if (st.jogging) throw CommandError("home: not while jogging");
+  if (st.homing) throw CommandError("home: homing is already running (stop aborts it)");
+  int axis = -1;
+  json names = json::array();
+  if (req.contains("axis")) {
+    axis = axis_index(req.at("axis"), cfg_.machine);
+    const auto& ax = cfg_.machine.axes[static_cast<std::size_t>(axis)];
+    using M = config::HomeConfig::Method;
+    if (ax.home.method == M::kAbsolute) {
+      throw CommandError("home: " + ax.name + " has an absolute encoder (home.method absolute): it is "
+                         "homed from the start, at home_offset_mm " + std::to_string(ax.home.home_offset_mm));
+    }
+    if (ax.home.method == M::kNone) {
+      throw CommandError("home: " + ax.name + " has no homing method (machine.axes[].home)");
+    }
+    names.push_back(ax.name);
+  } else {
+    for (const auto& ax : cfg_.machine.axes) {
+      if (ax.home.method == config::HomeConfig::Method::kSwitch) names.push_back(ax.name);
+    }
+    if (names.empty()) {
+      throw CommandError("home: no axis has a homing method that moves (machine.axes[].home.method switch)");
+    }
+  }
+  loop_->post({CommandKind::kHome, axis, 0.0, 0.0});
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  while (std::chrono::steady_clock::now() < until) {
+    const auto s = loop_->status();
+    if (s.homing) return {{"homing", names}};
+    if (s.cycle > st.cycle + 2 && s.state != MachineState::kReady) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  throw CommandError("home refused by the loop (state " + std::string(to_string(loop_->status().state)) +
+                     (loop_->status().homing ? "" : "; an inhibit_start from the soft PLC refuses it too") + ")");
+}
+
 json Daemon::cmd_set_position(const json& req) {
   const int axis = axis_index(req.at("axis"), cfg_.machine);
   const auto& ax = cfg_.machine.axes[static_cast<std::size_t>(axis)];
@@ -709,6 +805,7 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kLoad: return cmd_load(req);
     case CommandId::kUpload: return cmd_upload(req, client);
     case CommandId::kRun: {
+      require_homed("run");  // before a load: a refused run leaves nothing loaded
       if (req.contains("path") || req.contains("program")) cmd_load(req);
       const auto st = loop_->status();
       if (st.state != S::kReady) throw CommandError("run is not allowed in state " + state_name());
@@ -731,14 +828,18 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kResume: return simple(CommandKind::kResume);
     case CommandId::kStop: {
       const auto st = loop_->status();
-      if (st.state != S::kRunning && st.state != S::kHold && !st.jogging && st.attached_job == 0) {
+      if (st.state != S::kRunning && st.state != S::kHold && !st.jogging && !st.homing &&
+          st.attached_job == 0) {
         throw CommandError("stop: nothing to stop in state " + state_name());
       }
       loop_->post({CommandKind::kStop});
       const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
       while (std::chrono::steady_clock::now() < until) {
         const auto s = loop_->status();
-        if (s.cycle > st.cycle + 2 && s.state != S::kRunning && s.state != S::kHold && !s.jogging) break;
+        if (s.cycle > st.cycle + 2 && s.state != S::kRunning && s.state != S::kHold && !s.jogging &&
+            !s.homing) {
+          break;
+        }
         // The stop goes on in the loop; another client's E-stop must not wait for its end.
         if (s.cycle > st.cycle + 2 && safety_request_waiting()) break;
         std::this_thread::sleep_for(std::chrono::milliseconds(2));
@@ -780,8 +881,8 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kEnable: return simple(CommandKind::kEnable);
     case CommandId::kDisable: return simple(CommandKind::kDisable);
     case CommandId::kJog: return cmd_jog(req, client);
-    case CommandId::kSetPosition:
-    case CommandId::kHome: return cmd_set_position(req);
+    case CommandId::kSetPosition: return cmd_set_position(req);
+    case CommandId::kHome: return cmd_home(req);
     case CommandId::kGains: return cmd_gains(req);
     case CommandId::kOverride: {
       const double pct = req.at("percent").get<double>();

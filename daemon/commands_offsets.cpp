@@ -232,6 +232,8 @@ json Daemon::cmd_mdi(const json& req) {
   }
   if (st.attached_job != 0) throw CommandError("mdi: not while a program is loaded (stop it first)");
   if (st.jogging) throw CommandError("mdi: not while jogging");
+  if (st.homing) throw CommandError("mdi: not while homing");
+  require_homed("mdi");
   const std::string text = req.at("text").get<std::string>();
   if (text.size() > 4096) throw CommandError("mdi: more than 4096 bytes (use load/run for programs)");
   // One interpreter for all MDI blocks (modal state carries over, as in LinuxCNC); rebuilt from

@@ -116,6 +116,11 @@ class Daemon {
   void jog_deadman(std::uint64_t client_id, const char* why);
   void check_jog_deadman();
   nlohmann::json cmd_set_position(const nlohmann::json& req);
+  nlohmann::json cmd_home(const nlohmann::json& req);
+  // Homing (issue 18): the names of the axes not homed while homing is required ("" when none
+  // or machine.allow_unhomed), and the refusal of `what` (run, mdi) with them.
+  [[nodiscard]] std::string unhomed_axes() const;
+  void require_homed(const char* what) const;
   nlohmann::json cmd_record(const nlohmann::json& req);
   nlohmann::json cmd_force(const nlohmann::json& req);
   // A run-time argument range of the command table (the configuration): {lo, hi}.

@@ -77,6 +77,7 @@ std::string_view to_string(CommandKind k) noexcept {
     case CommandKind::kForce: return "force";
     case CommandKind::kIdentify: return "identify";
     case CommandKind::kJogBrake: return "jog brake (dead-man)";
+    case CommandKind::kHome: return "home";
   }
   return "?";
 }
@@ -155,6 +156,21 @@ std::string describe(const RtEvent& e) {
     case EventKind::kLimitCycleWarning:
       o << "LIMIT CYCLE WARNING axis " << e.axis << ": " << chatter_figure_text(e);
       break;
+    case EventKind::kHomed:
+      o << "axis " << e.axis << " homed: latch at " << e.value << " mm (encoder) is now " << e.limit
+        << " mm (home_offset_mm)";
+      break;
+    case EventKind::kHomingFailed:
+      o << "HOMING FAILED";
+      if (e.axis >= 0) o << " axis " << e.axis;
+      switch (e.detail) {
+        case 1: o << ": the drive reports no digital inputs (0x60FD): no home switch"; break;
+        case 2: o << ": the home switch did not close within search_distance_mm (" << e.value << " mm travelled)"; break;
+        case 3: o << ": the home switch did not open again within search_distance_mm"; break;
+        case 4: o << ": the home switch did not close again on the latch approach"; break;
+        default: o << ": aborted (stop, or the machine left READY) before every axis latched"; break;
+      }
+      break;
     case EventKind::kStandstillTimeout:
       o << "STANDSTILL TIMEOUT: axis " << e.axis << " still ";
       if (std::isnan(e.value)) {
@@ -196,7 +212,8 @@ void EventLogger::drain() {
       spdlog::error("{}", text);
     } else if (e.kind == EventKind::kCommandRefused || e.kind == EventKind::kUnderrun ||
                e.kind == EventKind::kProgramAborted || e.kind == EventKind::kForceFallback ||
-               e.kind == EventKind::kForceCeiling || e.kind == EventKind::kLimitCycleWarning) {
+               e.kind == EventKind::kForceCeiling || e.kind == EventKind::kLimitCycleWarning ||
+               e.kind == EventKind::kHomingFailed) {
       spdlog::warn("{}", text);
     } else {
       spdlog::info("{}", text);

@@ -39,6 +39,7 @@ enum class SourceKind : std::uint8_t {
   kHold,     // standstill: the reference stays where it is (READY), or follows the measured
              // position while the drives do not servo (DISABLED, ENABLING, ESTOP)
   kStop,     // FAULT: the controlled stop ramp
+  kHoming,   // `home`: switch search, latch and the move to the home position (READY)
 };
 const char* to_string(SourceKind k) noexcept;
 

@@ -12,6 +12,7 @@ const char* to_string(SourceKind k) noexcept {
     case SourceKind::kJog: return "jog";
     case SourceKind::kHold: return "hold";
     case SourceKind::kStop: return "stop";
+    case SourceKind::kHoming: return "homing";
   }
   return "?";
 }
@@ -190,6 +191,231 @@ RefPoint JogSource::step(const Eigen::Vector3d& ref_mm, const LiveLimits& lim, d
     r.position_mm[axis_] = target_mm_;
     active_ = false;
   }
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------
+// HomingSource
+
+const char* to_string(HomingSource::Phase p) noexcept {
+  switch (p) {
+    case HomingSource::Phase::kIdle: return "idle";
+    case HomingSource::Phase::kSearch: return "search";
+    case HomingSource::Phase::kBrakeSearch: return "search_brake";
+    case HomingSource::Phase::kBackoff: return "backoff";
+    case HomingSource::Phase::kBrakeBackoff: return "backoff_brake";
+    case HomingSource::Phase::kApproach: return "latch";
+    case HomingSource::Phase::kBrakeLatch: return "latch_brake";
+    case HomingSource::Phase::kLatched: return "latched";
+    case HomingSource::Phase::kFinal: return "final_move";
+    case HomingSource::Phase::kDone: return "done";
+    case HomingSource::Phase::kBraking: return "braking";
+  }
+  return "?";
+}
+
+void HomingSource::start(const std::array<AxisPlan, kMaxAxes>& plan, int axes,
+                         const Eigen::Vector3d& ref_mm) noexcept {
+  plan_ = plan;
+  axes_ = axes;
+  pos_mm_ = ref_mm;
+  v_.fill(0.0);
+  phase_.fill(Phase::kIdle);
+  homing_mask_ = 0;
+  for (int i = 0; i < axes_; ++i) {
+    if (plan_[static_cast<std::size_t>(i)].home) homing_mask_ |= 1u << i;
+  }
+  failed_axis_ = -1;
+  failure_ = "";
+  failure_code_ = 0;
+  shift_pending_ = false;
+  group_ = -1;
+  active_ = homing_mask_ != 0;
+  if (active_) start_group();
+}
+
+void HomingSource::start_group() noexcept {
+  // The lowest sequence number among the axes still to home.
+  int next = -1;
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    if ((homing_mask_ >> i & 1u) == 0 || phase_[a] == Phase::kDone) continue;
+    if (next < 0 || plan_[a].sequence < next) next = plan_[a].sequence;
+  }
+  group_mask_ = 0;
+  if (next < 0) {
+    active_ = false;
+    return;
+  }
+  group_ = next;
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    if ((homing_mask_ >> i & 1u) == 0 || phase_[a] == Phase::kDone || plan_[a].sequence != next) continue;
+    group_mask_ |= 1u << i;
+    phase_[a] = Phase::kSearch;
+    start_mm_[a] = pos_mm_[i];
+    v_[a] = 0.0;
+  }
+}
+
+void HomingSource::fail(int axis, std::uint8_t code, const char* why, double value) noexcept {
+  if (failed_axis_ < 0) {
+    failed_axis_ = axis;
+    failure_ = why;
+    failure_code_ = code;
+    failure_value_ = value;
+  }
+  abort();
+}
+
+void HomingSource::abort() noexcept {
+  if (!active_) return;
+  shift_pending_ = false;
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    if (phase_[a] != Phase::kIdle && phase_[a] != Phase::kDone) phase_[a] = Phase::kBraking;
+  }
+}
+
+void HomingSource::shifted(const Eigen::Vector3d& ref_mm) noexcept {
+  pos_mm_ = ref_mm;
+  shift_pending_ = false;
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    if ((group_mask_ >> i & 1u) == 0) continue;
+    phase_[a] = Phase::kFinal;
+    v_[a] = 0.0;
+  }
+}
+
+void HomingSource::ramp(std::size_t a, double v_target, double acc, double period_s) noexcept {
+  const double dv = acc * period_s;
+  v_[a] = v_target > v_[a] ? std::min(v_target, v_[a] + dv) : std::max(v_target, v_[a] - dv);
+  pos_mm_[static_cast<Eigen::Index>(a)] += v_[a] * period_s;
+}
+
+RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double period_s) noexcept {
+  RefPoint r;
+  r.source = SourceKind::kHoming;
+  r.track = true;
+  r.drives_on = true;
+  if (!active_) {
+    r.position_mm = pos_mm_;
+    return r;
+  }
+  bool group_latched = group_mask_ != 0;
+  bool group_done = group_mask_ != 0;
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    const Phase ph = phase_[a];
+    if (ph == Phase::kIdle || ph == Phase::kDone) continue;
+    const AxisPlan& p = plan_[a];
+    const double acc = lim.max_accel_mm_s2[a];
+    const AxisFeedback& ax = fb.bus.axis[a];
+    const bool edge_ok = ax.digital_inputs_present && ax.digital_inputs_fresh;
+    const bool sw = (ax.digital_inputs & kHomeSwitchBit) != 0;
+    const double search_dir = p.search_mm_s > 0.0 ? 1.0 : -1.0;
+    const bool release_latch = (p.latch_mm_s > 0.0) != (p.search_mm_s > 0.0);
+    const double travelled = std::abs(pos_mm_[i] - start_mm_[a]);
+    switch (ph) {
+      case Phase::kSearch:
+        if (!ax.digital_inputs_present) {
+          fail(i, 1, "the drive reports no digital inputs (0x60FD): no home switch to search", 0.0);
+        } else if (edge_ok && sw) {
+          phase_[a] = Phase::kBrakeSearch;
+        } else if (travelled > p.search_distance_mm) {
+          fail(i, 2, "the home switch did not close within search_distance_mm", travelled);
+        }
+        ramp(a, phase_[a] == Phase::kSearch ? p.search_mm_s : 0.0, acc, period_s);
+        break;
+      case Phase::kBrakeSearch:
+        ramp(a, 0.0, acc, period_s);
+        if (v_[a] == 0.0) {
+          phase_[a] = Phase::kBackoff;
+          start_mm_[a] = pos_mm_[i];
+        }
+        break;
+      case Phase::kBackoff: {
+        // Away from the switch at the latch speed; the release edge is the latch for an
+        // opposite-sign latch_vel.
+        if (edge_ok && !sw) {
+          if (release_latch) latch_mm_[a] = fb.act_mm[i];
+          phase_[a] = Phase::kBrakeBackoff;
+        } else if (travelled > p.search_distance_mm) {
+          fail(i, 3, "the home switch did not open again within search_distance_mm", travelled);
+        }
+        ramp(a, phase_[a] == Phase::kBackoff ? -search_dir * std::abs(p.latch_mm_s) : 0.0, acc, period_s);
+        break;
+      }
+      case Phase::kBrakeBackoff:
+        ramp(a, 0.0, acc, period_s);
+        if (v_[a] == 0.0) {
+          phase_[a] = release_latch ? Phase::kLatched : Phase::kApproach;
+          start_mm_[a] = pos_mm_[i];
+        }
+        break;
+      case Phase::kApproach:
+        if (edge_ok && sw) {
+          latch_mm_[a] = fb.act_mm[i];
+          phase_[a] = Phase::kBrakeLatch;
+        } else if (travelled > p.search_distance_mm) {
+          fail(i, 4, "the home switch did not close again on the latch approach", travelled);
+        }
+        ramp(a, phase_[a] == Phase::kApproach ? p.latch_mm_s : 0.0, acc, period_s);
+        break;
+      case Phase::kBrakeLatch:
+        ramp(a, 0.0, acc, period_s);
+        if (v_[a] == 0.0) phase_[a] = Phase::kLatched;
+        break;
+      case Phase::kLatched:
+        break;
+      case Phase::kFinal: {
+        // Trapezoid to home_position_mm at the search speed and the axis' acceleration.
+        const double rem = p.position_mm - pos_mm_[i];
+        const double vmax = std::min(std::abs(p.search_mm_s), lim.max_velocity_mm_s[a]);
+        // The speed from which braking at `acc` in whole cycles ends at the target.
+        const double half = 0.5 * acc * period_s;
+        const double v_brake = std::sqrt(half * half + 2.0 * acc * std::abs(rem)) - half;
+        const double v_t = (rem >= 0.0 ? 1.0 : -1.0) * std::min(vmax, v_brake);
+        ramp(a, v_t, acc, period_s);
+        const double after = p.position_mm - pos_mm_[i];
+        if ((rem >= 0.0) != (after >= 0.0) || std::abs(after) < 1e-9) {
+          pos_mm_[i] = p.position_mm;
+          v_[a] = 0.0;
+          phase_[a] = Phase::kDone;
+        }
+        break;
+      }
+      case Phase::kBraking:
+        ramp(a, 0.0, acc, period_s);
+        if (v_[a] == 0.0) phase_[a] = Phase::kIdle;
+        break;
+      case Phase::kIdle:
+      case Phase::kDone:
+        break;
+    }
+    if ((group_mask_ >> i & 1u) != 0) {
+      group_latched = group_latched && phase_[a] == Phase::kLatched;
+      group_done = group_done && phase_[a] == Phase::kDone;
+    }
+  }
+  bool braking = false;
+  bool group_idle = false;  // an axis of the group braked to rest: aborted or failed
+  for (int i = 0; i < axes_; ++i) {
+    const Phase ph = phase_[static_cast<std::size_t>(i)];
+    braking = braking || ph == Phase::kBraking;
+    group_idle = group_idle || ((group_mask_ >> i & 1u) != 0 && ph == Phase::kIdle);
+  }
+  if (braking) {
+    // abort / failure: the source ends once every axis stands
+  } else if (failed_axis_ >= 0 || group_idle) {
+    active_ = false;
+  } else if (group_latched) {
+    shift_pending_ = true;
+  } else if (group_done) {
+    start_group();  // the next sequence group, or the end
+  }
+  r.position_mm = pos_mm_;
   return r;
 }
 

@@ -138,6 +138,83 @@ class JogSource {
   double speed_mm_s_ = 0.0;
 };
 
+// Homing (issue 18, `home`): the axes of one sequence group at a time search their home switch
+// (the drive's 0x60FD bit 2), back off, latch at the slow speed (on the release edge when
+// latch_vel has the opposite sign of search_vel, else on the closing edge of a second, slow
+// approach) and stop; when every axis of the group has latched the loop shifts their machine
+// coordinates so that the latch point reads home_offset_mm (shift_pending()/shifted()); then they
+// move to home_position_mm and the next group starts. Each axis is a velocity ramp at the live
+// acceleration limit: the reference never jumps. The search is bounded by search_distance_mm, the
+// back-off by the same distance: a switch that never closes or never opens fails the homing
+// (failed(): the axes brake and the source ends). READY only; abort() brakes everything to rest.
+class HomingSource {
+ public:
+  enum class Phase : std::uint8_t {
+    kIdle, kSearch, kBrakeSearch, kBackoff, kBrakeBackoff, kApproach, kBrakeLatch, kLatched,
+    kFinal, kDone, kBraking /* abort or failure */,
+  };
+  struct AxisPlan {
+    bool home = false;  // this axis is homed by this run
+    int sequence = 0;
+    double search_mm_s = 0.0;  // signed
+    double latch_mm_s = 0.0;   // signed
+    double offset_mm = 0.0;
+    double position_mm = 0.0;
+    double search_distance_mm = 0.0;
+  };
+  static constexpr std::uint32_t kHomeSwitchBit = 1u << 2;  // CiA 402 0x60FD bit 2
+
+  // Non-RT or at a cycle boundary: home the axes of `plan` with home = true, from `ref_mm`.
+  void start(const std::array<AxisPlan, kMaxAxes>& plan, int axes, const Eigen::Vector3d& ref_mm) noexcept;
+  RefPoint step(const Feedback& fb, const LiveLimits& lim, double period_s) noexcept;
+  // Brake every moving axis to rest, then end (stop, dead-man, leaving READY is cancel()).
+  void abort() noexcept;
+  void cancel() noexcept { active_ = false; shift_pending_ = false; }
+  [[nodiscard]] bool active() const noexcept { return active_; }
+  // The current group latched and stands: the loop applies the shifts (latch_mm -> offset_mm),
+  // then calls shifted() with the reference in the new coordinates.
+  [[nodiscard]] bool shift_pending() const noexcept { return shift_pending_; }
+  [[nodiscard]] std::uint32_t group_mask() const noexcept { return group_mask_; }
+  [[nodiscard]] double latch_mm(int axis) const noexcept { return latch_mm_[static_cast<std::size_t>(axis)]; }
+  [[nodiscard]] double offset_mm(int axis) const noexcept { return plan_[static_cast<std::size_t>(axis)].offset_mm; }
+  void shifted(const Eigen::Vector3d& ref_mm) noexcept;
+  // Ended by a failure: the axis and its reason (a static string).
+  [[nodiscard]] bool failed() const noexcept { return failed_axis_ >= 0; }
+  [[nodiscard]] int failed_axis() const noexcept { return failed_axis_; }
+  [[nodiscard]] const char* failure() const noexcept { return failure_; }
+  // EventKind::kHomingFailed's detail: 1 no inputs, 2 switch never closed, 3 never opened,
+  // 4 never closed on the latch approach.
+  [[nodiscard]] std::uint8_t failure_code() const noexcept { return failure_code_; }
+  [[nodiscard]] double failure_value() const noexcept { return failure_value_; }
+  [[nodiscard]] Phase phase(int axis) const noexcept { return phase_[static_cast<std::size_t>(axis)]; }
+  // Axes that finished (moved to home_position_mm) since start(); the loop marks them homed at the shift.
+  [[nodiscard]] std::uint32_t homing_mask() const noexcept { return homing_mask_; }
+
+ private:
+  void start_group() noexcept;
+  void fail(int axis, std::uint8_t code, const char* why, double value) noexcept;
+  // One velocity-ramp step of axis a towards v_target; returns the new velocity.
+  void ramp(std::size_t a, double v_target, double acc, double period_s) noexcept;
+
+  std::array<AxisPlan, kMaxAxes> plan_{};
+  std::array<Phase, kMaxAxes> phase_{};
+  std::array<double, kMaxAxes> v_{};
+  std::array<double, kMaxAxes> start_mm_{};  // where the current phase began (distance bound)
+  std::array<double, kMaxAxes> latch_mm_{};
+  Eigen::Vector3d pos_mm_ = Eigen::Vector3d::Zero();
+  int axes_ = 0;
+  int group_ = -1;                 // current sequence number
+  std::uint32_t group_mask_ = 0;   // axes of the current group
+  std::uint32_t homing_mask_ = 0;  // axes still to home (all groups)
+  bool active_ = false;
+  bool shift_pending_ = false;
+  int failed_axis_ = -1;
+  const char* failure_ = "";
+  std::uint8_t failure_code_ = 0;
+  double failure_value_ = 0.0;
+};
+const char* to_string(HomingSource::Phase p) noexcept;
+
 // Standstill. Servoing (READY): the reference stays at the position given to start(). Not
 // servoing (DISABLED, ENABLING, ESTOP): the reference follows the measured position, so that the
 // controllers start from where the axes are when the drives come back.

@@ -65,8 +65,17 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
     // stale (v_est += (v_cmd - v_est) * lag_alpha), the acceleration clamp's reference then.
     lag_alpha_[i] = tau_s_[i] > 0.0 ? 1.0 - std::exp(-period_s_ / tau_s_[i]) : 1.0;
   }
+  for (std::size_t i = 0; i < 3 && i < cfg.machine.axes.size(); ++i) {
+    // An absolute encoder knows the machine position from the start.
+    const config::HomeConfig& h = cfg.machine.axes[i].home;
+    if (h.method == config::HomeConfig::Method::kAbsolute) {
+      home_shift_mm_[i] = h.home_offset_mm;
+      homed_[i] = true;
+    }
+  }
   limits_ = live_limits_from(cfg);
   validate(limits_, axes_);
+  limits_eff_ = limits_;
   applied_limits_ = staged_limits_ = limits_;
   base_params_ = servo_params_from(cfg);
   ctrl_.configure(base_params_);
@@ -194,6 +203,7 @@ void ServoLoop::raise_fault(const FaultReport& f) noexcept {
   transition(t, f.cause);
   detach_job(false);
   jog_.cancel();
+  cancel_homing();
   stop_.start(stop_velocity(), axes_);
 }
 
@@ -212,6 +222,83 @@ void ServoLoop::detach_job(bool ok) noexcept {
   events_.push(RtEvent{cycle_, ok ? EventKind::kProgramDone : EventKind::kProgramAborted,
                        sm_.state(), sm_.state(), FaultCause::kNone, CommandKind::kStop, -1,
                        progress, 0.0, job->id});
+}
+
+bool ServoLoop::soft_limits_apply(int axis) const noexcept {
+  const auto a = static_cast<std::size_t>(axis);
+  if (homing_.active() && (homing_.homing_mask() >> axis & 1u) != 0) return false;
+  return homed_[a] || cfg_.machine.allow_unhomed;
+}
+
+bool ServoLoop::program_may_run() const noexcept {
+  if (cfg_.machine.allow_unhomed) return true;
+  for (int i = 0; i < axes_; ++i) {
+    if (!homed_[static_cast<std::size_t>(i)]) return false;
+  }
+  return true;
+}
+
+void ServoLoop::update_effective_limits() noexcept {
+  limits_eff_ = limits_;
+  for (int i = 0; i < axes_; ++i) {
+    if (soft_limits_apply(i)) continue;
+    const auto a = static_cast<std::size_t>(i);
+    limits_eff_.min_mm[a] = -1e300;
+    limits_eff_.max_mm[a] = 1e300;
+  }
+}
+
+void ServoLoop::cancel_homing() noexcept {
+  if (!homing_.active()) return;
+  homing_.cancel();
+  homing_failure_ = 5;
+  homing_failure_axis_ = -1;
+  emit(EventKind::kHomingFailed, FaultCause::kNone, -1, 0.0, 0.0, 5);
+  homing_was_active_ = false;
+}
+
+RefPoint ServoLoop::homing_step() noexcept {
+  RefPoint r = homing_.step(fb_, limits_, period_s_);
+  if (homing_.shift_pending()) {
+    // The group latched and stands: its machine coordinates move so that each latch point reads
+    // home_offset_mm. Reference, measurement and the previous reference move together (no
+    // velocity step); the controllers and the model restart from rest in the new coordinates.
+    const std::uint32_t g = homing_.group_mask();
+    for (int i = 0; i < axes_; ++i) {
+      if ((g >> i & 1u) == 0) continue;
+      const auto a = static_cast<std::size_t>(i);
+      const double shift = homing_.offset_mm(i) - homing_.latch_mm(i);
+      home_shift_mm_[a] += shift;
+      fb_.act_mm[i] += shift;
+      r.position_mm[i] += shift;
+      ref_prev_[i] += shift;
+      homed_[a] = true;
+      emit(EventKind::kHomed, FaultCause::kNone, i, homing_.latch_mm(i), homing_.offset_mm(i));
+    }
+    ctrl_.reset();
+    model_.reset();
+    v_cmd_.fill(0.0);
+    homing_.shifted(r.position_mm);
+  }
+  if (!homing_.active()) {
+    if (homing_.failed()) {
+      homing_failure_ = homing_.failure_code();
+      homing_failure_axis_ = homing_.failed_axis();
+      emit(EventKind::kHomingFailed, FaultCause::kNone, homing_.failed_axis(), homing_.failure_value(),
+           0.0, homing_.failure_code());
+    } else if (homing_was_active_ && homing_.homing_mask() != 0) {
+      bool aborted = false;
+      for (int i = 0; i < axes_; ++i) {
+        if ((homing_.homing_mask() >> i & 1u) != 0 && !homed_[static_cast<std::size_t>(i)]) aborted = true;
+      }
+      if (aborted) {
+        homing_failure_ = 5;
+        emit(EventKind::kHomingFailed, FaultCause::kNone, -1, 0.0, 0.0, 5);
+      }
+    }
+    homing_was_active_ = false;
+  }
+  return r;
 }
 
 void ServoLoop::hold_here() noexcept {
@@ -258,6 +345,7 @@ void ServoLoop::enter_estop(FaultCause cause) noexcept {
   transition(t, cause);
   detach_job(false);
   jog_.cancel();
+  cancel_homing();
   v_cmd_.fill(0.0);
 }
 
@@ -274,6 +362,7 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
         // The drives are switched off only at standstill: a moving axis (a jog) is ramped down
         // first, like a fault's controlled stop.
         jog_.cancel();
+        cancel_homing();
         stop_.start(stop_velocity(), axes_);
       }
       transition(t, FaultCause::kNone);
@@ -289,8 +378,8 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       program_.attach(c.job);
       break;
     case CommandKind::kRun:
-      if (st != MachineState::kReady || !program_.attached() || jog_.active() ||
-          plc_req_.inhibit_start) {  // soft PLC: NC.inhibit_start
+      if (st != MachineState::kReady || !program_.attached() || jog_.active() || homing_.active() ||
+          !program_may_run() || plc_req_.inhibit_start) {  // soft PLC: NC.inhibit_start
         refuse();
         break;
       }
@@ -319,6 +408,8 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       } else if (jog_.active()) {
         // Brake the jog at the axis deceleration.
         jog_.brake(ref_[jog_.axis()], limits_.max_accel_mm_s2[static_cast<std::size_t>(jog_.axis())]);
+      } else if (homing_.active()) {
+        homing_.abort();  // the homing axes brake at their acceleration; not homed
       } else if (program_.attached() && st == MachineState::kReady) {
         detach_job(false);  // unload a program that was never started
       }
@@ -343,11 +434,45 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
     }
     case CommandKind::kJog: {
       if (st != MachineState::kReady || c.axis < 0 || c.axis >= axes_ || !(c.a > 0.0) ||
-          !std::isfinite(c.b) || plc_req_.inhibit_start) {
+          !std::isfinite(c.b) || plc_req_.inhibit_start || homing_.active()) {
         refuse();
         break;
       }
-      jog_.start(c.axis, c.a, ref_[c.axis] + c.b);
+      // Not homed (and homing required): the slow jog speed of home.unhomed_jog_mm_min.
+      const auto ja = static_cast<std::size_t>(c.axis);
+      const double v = soft_limits_apply(c.axis) ? c.a : std::min(c.a, cfg_.machine.axes[ja].home.unhomed_jog_mm_s);
+      jog_.start(c.axis, v, ref_[c.axis] + c.b);
+      break;
+    }
+    case CommandKind::kHome: {
+      if (st != MachineState::kReady || program_.attached() || jog_.active() || homing_.active() ||
+          c.axis < -1 || c.axis >= axes_ || plc_req_.inhibit_start ||
+          ident_state_.load(std::memory_order_relaxed) == IdentifyState::kRunning) {
+        refuse();
+        break;
+      }
+      std::array<HomingSource::AxisPlan, kMaxAxes> plan{};
+      bool any = false;
+      for (int i = 0; i < axes_; ++i) {
+        const auto a = static_cast<std::size_t>(i);
+        const config::HomeConfig& h = cfg_.machine.axes[a].home;
+        if (h.method != config::HomeConfig::Method::kSwitch || (c.axis >= 0 && c.axis != i)) continue;
+        plan[a] = {true, h.sequence, h.search_vel_mm_s, h.latch_vel_mm_s, h.home_offset_mm,
+                   h.home_position_mm, h.search_distance_mm};
+        any = true;
+      }
+      if (!any) {
+        refuse();
+        break;
+      }
+      for (int i = 0; i < axes_; ++i) {
+        if (plan[static_cast<std::size_t>(i)].home) homed_[static_cast<std::size_t>(i)] = false;
+      }
+      homing_.start(plan, axes_, ref_);
+      homing_was_active_ = true;
+      ++homing_runs_;
+      homing_failure_ = 0;
+      homing_failure_axis_ = -1;
       break;
     }
     case CommandKind::kJogBrake:
@@ -365,7 +490,8 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       // SimBus::set_position only resets a plant state (no allocation); a CANopen bus would do it
       // with SDOs and must not be called here (its adapter refuses: returns false).
       if ((st != MachineState::kReady && st != MachineState::kDisabled) || program_.attached() ||
-          jog_.active() || c.axis < 0 || c.axis >= axes_ || !bus_.set_position(c.axis, c.a)) {
+          jog_.active() || homing_.active() || c.axis < 0 || c.axis >= axes_ ||
+          !bus_.set_position(c.axis, c.a - home_shift_mm_[static_cast<std::size_t>(c.axis < 0 ? 0 : c.axis)])) {
         refuse();
         break;
       }
@@ -373,8 +499,9 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       hold_here();
       break;
     case CommandKind::kIdentify:
-      if (st != MachineState::kReady || program_.attached() || jog_.active() || c.axis < 0 ||
-          c.axis >= axes_ || ident_state_.load(std::memory_order_relaxed) == IdentifyState::kRunning) {
+      if (st != MachineState::kReady || program_.attached() || jog_.active() || homing_.active() ||
+          c.axis < 0 || c.axis >= axes_ ||
+          ident_state_.load(std::memory_order_relaxed) == IdentifyState::kRunning) {
         refuse();
         break;
       }
@@ -468,6 +595,7 @@ void ServoLoop::logic() noexcept {
   // is; older, or never received, it is not valid and the PLC uses the signal's default.
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
+    in.homed[a] = homed_[a];  // NC.homed / NC.homed_<axis>
     in.drive_inputs[a] = fb_.bus.axis[a].digital_inputs;
     in.drive_inputs_valid[a] = fb_.bus.axis[a].digital_inputs_present &&
                                drive_inputs_age_[a] < drive_inputs_max_age_;
@@ -510,6 +638,8 @@ void ServoLoop::logic() noexcept {
       transition(sm_.apply(Request::kStop), FaultCause::kNone);
     } else if (jog_.active()) {
       jog_.brake(ref_[jog_.axis()], limits_.max_accel_mm_s2[static_cast<std::size_t>(jog_.axis())]);
+    } else if (homing_.active()) {
+      homing_.abort();
     }
   }
   if (rq.feed_hold && now == MachineState::kRunning) {
@@ -569,7 +699,7 @@ void ServoLoop::read() noexcept {
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
     if (fb_.bus.axis[a].fresh) {
-      fb_.act_mm[i] = fb_.bus.axis[a].position_mm;
+      fb_.act_mm[i] = fb_.bus.axis[a].position_mm + home_shift_mm_[a];
       fb_.missed_streak[a] = 0;
       v_est_[a] = fb_.bus.axis[a].velocity_mm_s;
     } else {
@@ -626,6 +756,7 @@ MachineState ServoLoop::advance_state() noexcept {
 SourceKind ServoLoop::select_source(MachineState st) const noexcept {
   if (in_program(st)) return SourceKind::kProgram;
   if (jog_.active() && st == MachineState::kReady) return SourceKind::kJog;
+  if (homing_.active() && st == MachineState::kReady) return SourceKind::kHoming;
   if (st == MachineState::kFault) return SourceKind::kStop;
   // `disable`: the drives are still on until the axes stand still.
   if (st == MachineState::kDisabled && !stop_.done()) return SourceKind::kStop;
@@ -635,13 +766,16 @@ SourceKind ServoLoop::select_source(MachineState st) const noexcept {
 RefPoint ServoLoop::reference(MachineState st, bool servo) noexcept {
   ref_prev_ = ref_;
   program_.drain();  // READY too: the interpolator is pre-filled before `run`
+  if (homing_.active() && st != MachineState::kReady) cancel_homing();
+  update_effective_limits();
   const SourceKind next = select_source(st);
   if (next != source_ && next == SourceKind::kHold) hold_.start(ref_);  // switch at the boundary
   source_ = next;
   RefPoint r;
   switch (next) {
     case SourceKind::kProgram: program_step(st, r); break;
-    case SourceKind::kJog: r = jog_.step(ref_, limits_, period_s_); break;
+    case SourceKind::kJog: r = jog_.step(ref_, limits_eff_, period_s_); break;
+    case SourceKind::kHoming: r = homing_step(); break;
     case SourceKind::kHold: r = hold_.step(fb_, servo); break;
     case SourceKind::kStop:
       r = stop_.step(fb_, limits_, period_s_);
@@ -747,7 +881,14 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
   if (servo) {
     const control::Vec3 p_hat = ctrl_.predict(fb_.act_mm);
     model_.push_reference(ref_);
-    const control::ContourErrorResult ce = model_.update(p_hat);
+    control::ContourErrorResult ce = model_.update(p_hat);
+    if (r.source == SourceKind::kHoming) {
+      // Homing moves each axis on its own (LinuxCNC homes joints): there is no contour to hold,
+      // and the cross-coupling would push one axis with the other's lag (a stop of the diagonal
+      // final move made the soft Table 1 loop ring into a following-error fault). The axis
+      // controllers alone track the homing reference.
+      ce.eps.setZero();
+    }
     eps_ = ce.eps;
     eps_norm = ce.eps.norm();
     control::Vec3 u = control::Vec3::Zero();
@@ -907,7 +1048,7 @@ void ServoLoop::supervise(MachineState st, bool servo, const Eigen::Vector3d& v_
     if (const FaultReport f = supervisor_.check_bus(fb_, servo)) raise_fault(f);
   }
   if (servo && sm_.state() != MachineState::kFault) {
-    if (const FaultReport f = supervisor_.check_motion(ref_, fb_.act_mm, v_ref, eps_norm, limits_)) {
+    if (const FaultReport f = supervisor_.check_motion(ref_, fb_.act_mm, v_ref, eps_norm, limits_eff_)) {
       raise_fault(f);
     }
   }
@@ -1018,6 +1159,17 @@ void ServoLoop::publish() noexcept {
   pub_.gains_generation = gains_generation_;
   pub_.gains_cycle = gains_cycle_;
   pub_.jogging = jog_.active();
+  pub_.homing = homing_.active();
+  pub_.homing_runs = homing_runs_;
+  pub_.homing_failure = homing_failure_;
+  pub_.homing_failure_axis = homing_failure_axis_;
+  pub_.homed_mask = 0;
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    if (homed_[a]) pub_.homed_mask |= 1u << i;
+    pub_.home_phase[a] = static_cast<std::uint8_t>(homing_.phase(i));
+    pub_.home_shift_mm[a] = home_shift_mm_[a];
+  }
   // An M6 / M1xx the machine logic runs is not the operator's pause (status shows the PLC's
   // handshake under `plc status`).
   pub_.interp_holding = io.status == control::InterpStatus::kHolding &&

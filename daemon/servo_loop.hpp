@@ -66,6 +66,7 @@ enum class CommandKind : std::uint8_t {
   kForce,        // axis: 1 = on, 0 = off, -1 = unchanged; a = reference N (NaN = unchanged)
   kIdentify,     // axis: play the identification excitation on it (READY, nothing loaded/jogging)
   kJogBrake,     // brake a jog at the axis' deceleration (continuous jog's dead-man); else nothing
+  kHome,         // axis (-1: every axis with a homing method, in home.sequence order); READY
 };
 
 // Drive identification (issue 16, `contourctl identify`): the loop plays a preallocated velocity
@@ -99,6 +100,9 @@ enum class EventKind : std::uint8_t {
                        // fresh feedback), limit = safety.standstill_timeout_s; quick stop now
   kLimitCycleWarning,  // safety.chatter warning level held: axis, value/limit, detail = figure
                        // (control::ChatterFigureKind: 1 command chatter mm/s, 2 clamped cycles/s)
+  kHomed,          // axis homed: value = latch position before the shift (mm), limit = home_offset_mm
+  kHomingFailed,   // axis, value = travelled mm; detail 1 no switch input, 2 switch never closed,
+                   // 3 never opened, 4 never closed on the latch approach, 5 aborted (stop / state)
 };
 
 // Fixed-size event record (RT -> logger thread).
@@ -176,6 +180,15 @@ struct LoopStatus {
   std::uint64_t gains_generation = 0;
   std::uint64_t gains_cycle = 0;    // cycle at which the last gains swap took effect
   bool jogging = false;
+  // Homing (issue 18): which axes are homed (bit per axis), whether homing is running, each
+  // axis' phase (HomingSource::Phase), and the machine-coordinate shift homing applied.
+  std::uint32_t homed_mask = 0;
+  bool homing = false;
+  std::array<std::uint8_t, 3> home_phase{};
+  std::array<double, 3> home_shift_mm{};
+  std::uint64_t homing_runs = 0;      // `home` commands the loop accepted
+  std::uint8_t homing_failure = 0;    // of the last run: 0 none, else kHomingFailed's detail
+  int homing_failure_axis = -1;
   bool interp_holding = false;      // M0/M1/M6 hold in the program
   int hold_line = 0;                // while interp_holding: the hold's source line,
   int hold_tool = 0;                // the tool after it (M6: the tool to load),
@@ -329,6 +342,12 @@ class ServoLoop {
   void refuse_command(CommandKind k) noexcept;  // kCommandRefused event
   bool try_reset() noexcept;  // FAULT/ESTOP -> enable when every cause is gone
   void hold_here() noexcept;  // reference := current measured position, controller state reset
+  // Homing (issue 18).
+  [[nodiscard]] bool soft_limits_apply(int axis) const noexcept;  // homed, or allow_unhomed
+  [[nodiscard]] bool program_may_run() const noexcept;            // every axis homed, or allowed
+  void update_effective_limits() noexcept;                        // limits_eff_ from limits_
+  void cancel_homing() noexcept;                                  // leaving READY
+  RefPoint homing_step() noexcept;
   void publish() noexcept;
   void enter_estop(FaultCause cause) noexcept;
   // The velocity each axis really has, to start a controlled stop from (see the definition).
@@ -359,7 +378,19 @@ class ServoLoop {
   // Reference sources (one active per cycle) and channels.
   ProgramSource program_;
   JogSource jog_;
+  HomingSource homing_;
   HoldSource hold_;
+  // Homing: machine position = bus position + home_shift_mm_ (absolute axes: home_offset_mm from
+  // the start; switch axes: set at the latch). Soft limits and the program checks apply to an axis
+  // once it is homed, or always with machine.allow_unhomed; limits_eff_ is limits_ with the soft
+  // limits of the other axes (and of the axes being homed) opened.
+  std::array<double, kMaxAxes> home_shift_mm_{};
+  std::array<bool, kMaxAxes> homed_{};
+  bool homing_was_active_ = false;
+  std::uint64_t homing_runs_ = 0;
+  std::uint8_t homing_failure_ = 0;
+  int homing_failure_axis_ = -1;
+  LiveLimits limits_eff_{};
   StopSource stop_;
   SourceKind source_ = SourceKind::kHold;
   ForceChannel force_;

@@ -74,7 +74,7 @@ void SimBus::read(BusFeedback& fb) noexcept {
     if (can_cpm_[a] > 0.0) {
       // What CanopenBus makes of the drive's TPDO (see the constructor's comment).
       const double cpm = can_cpm_[a];
-      const std::int64_t counts = std::llround(drive_[a].position_mm() * cpm);
+      const std::int64_t counts = std::llround((drive_[a].position_mm() - encoder_zero_mm_[a]) * cpm);
       f.position_mm = static_cast<double>(counts) / cpm;
       if (can_velocity_mapped_) {
         f.velocity_mm_s = static_cast<double>(std::llround(drive_[a].velocity_mm_s() * cpm)) / cpm;
@@ -86,7 +86,7 @@ void SimBus::read(BusFeedback& fb) noexcept {
         can_last_counts_[a] = counts;
       }
     } else {
-      f.position_mm = drive_[a].measured_mm();
+      f.position_mm = drive_[a].measured_mm() - encoder_zero_mm_[a];
       f.velocity_mm_s = drive_[a].velocity_mm_s();
     }
     f.fresh = true;
@@ -137,10 +137,17 @@ void SimBus::write(const AxisCommands& cmd) noexcept {
 
 bool SimBus::set_position(int axis, double position_mm) {
   if (axis < 0 || axis >= axes_) return false;
-  drive_[static_cast<std::size_t>(axis)].reset(position_mm);
+  drive_[static_cast<std::size_t>(axis)].reset(position_mm + encoder_zero_mm_[static_cast<std::size_t>(axis)]);
   latched_v_[static_cast<std::size_t>(axis)] = 0.0;
   received_v_[static_cast<std::size_t>(axis)] = 0.0;
   return true;
+}
+
+void SimBus::power_up_at(int axis, double true_mm) {
+  if (axis < 0 || axis >= axes_) throw std::invalid_argument("SimBus::power_up_at: no such axis");
+  const auto a = static_cast<std::size_t>(axis);
+  drive_[a].reset(true_mm);
+  encoder_zero_mm_[a] = true_mm;
 }
 
 std::string SimBus::describe() const {
@@ -179,7 +186,7 @@ std::unique_ptr<SimBus> make_sim_bus(const config::Config& cfg) {
     for (const auto& e : cfg.bus.spindle->tpdo) can_spindle_feedback = can_spindle_feedback || e.index == 0x606C;
   }
   if (cfg.spindle.type == "sim" || can_spindle_feedback) bus->configure_spindle(cfg.spindle.sim_tau_s);
-  add_default_input_switches(*bus, cfg);
+  configure_sim_machine(*bus, cfg);
   return bus;
 }
 
@@ -190,6 +197,19 @@ void add_default_input_switches(SimBus& bus, const config::Config& cfg) {
     bus.add_input_switch(i, 0, ax.min_mm - kSimLimitMargin_mm, false);
     bus.add_input_switch(i, 1, ax.max_mm + kSimLimitMargin_mm, true);
     bus.add_input_switch(i, 2, ax.min_mm + kSimHomeBand_mm, false);
+  }
+}
+
+}  // namespace contour::daemon
+
+namespace contour::daemon {
+
+void configure_sim_machine(SimBus& bus, const config::Config& cfg) {
+  add_default_input_switches(bus, cfg);
+  for (std::size_t a = 0; a < cfg.machine.axes.size() && a < static_cast<std::size_t>(kMaxAxes); ++a) {
+    if (cfg.machine.axes[a].sim_power_up_mm != 0.0) {
+      bus.power_up_at(static_cast<int>(a), cfg.machine.axes[a].sim_power_up_mm);
+    }
   }
 }
 

@@ -61,6 +61,14 @@ class SimBus final : public AxisBus {
   // Setup-time only (before the loop runs); at most kMaxSwitches per axis (std::invalid_argument).
   static constexpr std::size_t kMaxSwitches = 4;
   void add_input_switch(int axis, int bit, double threshold_mm, bool on_above);
+  // Power-up (setup-time only): the axis stands at the true position `true_mm` and its
+  // incremental encoder reads 0 there (machine.axes[].sim.power_up_mm): reported positions are
+  // true - true_mm from then on; the switches stay on the true position.
+  void power_up_at(int axis, double true_mm);
+  // The plant's true position (tests: where the machine really is, whatever homing found).
+  [[nodiscard]] double true_position_mm(int axis) const noexcept {
+    return drive_[static_cast<std::size_t>(axis)].position_mm();
+  }
   void clear_input_switches() noexcept;
   // Thread-safe override of input bits (tests, fault injection): bits in `mask` read as `values`.
   void inject_digital_inputs(int axis, std::uint32_t mask, std::uint32_t values) noexcept {
@@ -93,6 +101,7 @@ class SimBus final : public AxisBus {
   std::atomic<bool> spindle_fault_{false};
   std::uint64_t cycle_ = 0;
   std::array<double, kMaxAxes> can_cpm_{};  // 0 = ideal bus
+  std::array<double, kMaxAxes> encoder_zero_mm_{};  // true position where the encoder reads 0
   bool can_velocity_mapped_ = false;
   std::array<std::int64_t, kMaxAxes> can_last_counts_{};
   bool can_have_last_ = false;
@@ -117,6 +126,9 @@ class SimBus final : public AxisBus {
 inline constexpr double kSimLimitMargin_mm = 2.0;
 inline constexpr double kSimHomeBand_mm = 0.5;
 void add_default_input_switches(SimBus& bus, const config::Config& cfg);
+// The built-in simulated machine as configured: the default switches, and each axis standing at
+// machine.axes[].sim.power_up_mm with its encoder reading 0 there (homing has to find zero).
+void configure_sim_machine(SimBus& bus, const config::Config& cfg);
 
 // The drives of machine.axes with the loop period (delay_cycles as configured).
 std::vector<control::FeedDriveParams> sim_bus_drives(const config::Config& cfg);

@@ -253,6 +253,55 @@ struct RunOptions {
   double progress_interval_s = 1.0;  // non-TTY progress lines
 };
 
+// `home AXIS | --all`: starts homing, prints each axis' phase as it changes, and waits until the
+// loop's homing ends. Exit 0 when the requested axes are homed, 1 when homing failed or was
+// aborted (the reason from status.homing.failure).
+int cmd_home(Client& c, const std::string& axis, bool all, bool as_json) {
+  if (all == !axis.empty()) {
+    std::cerr << "contourctl: home AXIS, or home --all\n";
+    return kExitUsage;
+  }
+  json req{{"cmd", "home"}};
+  if (!all) req["axis"] = axis;
+  const json r = c.call(req);
+  const json axes = r.value("homing", json::array());
+  if (!as_json) {
+    std::printf("homing %s\n", axes.dump().c_str());
+    std::fflush(stdout);
+  }
+  json last_phase;
+  json st;
+  for (;;) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    st = c.call({{"cmd", "status"}});
+    const json& h = st["homing"];
+    if (!as_json && h["phase"] != last_phase) {
+      std::string line;
+      for (const auto& n : axes) {
+        const std::string name = n.get<std::string>();
+        line += (line.empty() ? "" : ", ") + name + " " + h["phase"].value(name, std::string("?"));
+      }
+      std::printf("  %s\n", line.c_str());
+      std::fflush(stdout);
+      last_phase = h["phase"];
+    }
+    if (!h.value("active", false)) break;
+  }
+  bool ok = true;
+  for (const auto& n : axes) ok = ok && st["homed"].value(n.get<std::string>(), false);
+  if (as_json) {
+    std::cout << json{{"homing", axes}, {"homed", st["homed"]}, {"failure", st["homing"]["failure"]},
+                      {"act_mm", st["act_mm"]}}.dump() << std::endl;
+  } else if (ok) {
+    std::printf("homed %s; reference at %s mm (machine coordinates)\n", axes.dump().c_str(),
+                st["ref_mm"].dump().c_str());
+  } else {
+    const json& f = st["homing"]["failure"];
+    std::printf("homing failed: %s\n", f.is_string() ? f.get<std::string>().c_str() : "not homed");
+  }
+  return ok ? kExitOk : kExitError;
+}
+
 int cmd_run(Client& c, const RunOptions& o, bool as_json) {
   json req{{"cmd", "run"}};
   std::vector<int> lines;
@@ -510,6 +559,8 @@ int main(int argc, char** argv) {
   std::string axis;
   double vel = 0.0, dist = 0.0, pos = 0.0, pct = 100.0;
   std::string jog_dir;
+  std::string home_axis;
+  bool home_all = false;
   std::vector<std::string> gains_args, record_args, force_args, csvs, labels;
   bool gains_no_identified = false;
   std::string gains_file, gains_output, plot_png, plot_kind = "error", plot_title, plot_program;
@@ -543,6 +594,11 @@ int main(int argc, char** argv) {
                   "+ or -: jog until Ctrl-C / stop / the soft limit; the daemon brakes the axis when "
                   "this client goes away (dead-man)")
       ->check(CLI::IsMember({"+", "-"}));
+  auto* home = app.add_subcommand(
+      "home", "home AXIS, or home --all: switch search, latch, move to the home position, in "
+              "home.sequence order; prints the progress and waits until homed (Ctrl-C / stop aborts)");
+  home->add_option("AXIS", home_axis);
+  home->add_flag("--all", home_all, "every axis with a homing method");
   auto* setpos =
       app.add_subcommand("set-position", "set an axis position (sim / absolute encoders)");
   setpos->add_option("AXIS", axis)->required();
@@ -753,6 +809,8 @@ int main(int argc, char** argv) {
         return kExitUsage;
       }
       req["distance_mm"] = dist;
+    } else if (cmd == "home") {
+      return cmd_home(c, home_axis, home_all, as_json);
     } else if (cmd == "set-position") {
       req["axis"] = axis;
       req["position_mm"] = pos;

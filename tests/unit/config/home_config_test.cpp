@@ -1,0 +1,87 @@
+// machine.axes[].home and machine.allow_unhomed (issue 18): parsed with LinuxCNC's meaning,
+// validated on load, errors naming the axis and the field.
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "config/config.hpp"
+#include "tests/support/config_errors.hpp"
+
+namespace {
+
+using contour::config::HomeConfig;
+using contour::config::load_config_string;
+using contour::test::any_contains;
+using contour::test::config_errors;
+
+std::string machine(const std::string& x_home, const std::string& extra = "",
+                    const std::string& y = "    - {name: Y}\n") {
+  return "machine:\n" + extra + "  axes:\n    - name: X\n      min_mm: -200\n      max_mm: 200\n" + x_home + y;
+}
+
+const std::string kSwitch =
+    "      home: {method: switch, search_vel_mm_min: -1200, latch_vel_mm_min: 60, "
+    "home_offset_mm: -199.5, home_position_mm: 0, sequence: 1}\n";
+
+TEST(HomeConfig, NoHomeSectionAnywhereAllowsUnhomedMachines) {
+  const auto cfg = load_config_string(machine(""));
+  EXPECT_TRUE(cfg.machine.allow_unhomed);
+  EXPECT_EQ(cfg.machine.axes[0].home.method, HomeConfig::Method::kNone);
+  EXPECT_FALSE(cfg.machine.axes[0].home.present);
+}
+
+TEST(HomeConfig, ASwitchHomeIsParsedInMillimetresPerSecond) {
+  const auto cfg = load_config_string(machine(kSwitch, "  allow_unhomed: true\n"));
+  const HomeConfig& h = cfg.machine.axes[0].home;
+  EXPECT_EQ(h.method, HomeConfig::Method::kSwitch);
+  EXPECT_DOUBLE_EQ(h.search_vel_mm_s, -20.0);
+  EXPECT_DOUBLE_EQ(h.latch_vel_mm_s, 1.0);
+  EXPECT_DOUBLE_EQ(h.home_offset_mm, -199.5);
+  EXPECT_DOUBLE_EQ(h.home_position_mm, 0.0);
+  EXPECT_EQ(h.sequence, 1);
+  EXPECT_DOUBLE_EQ(h.search_distance_mm, 480.0);  // 1.2 x the travel by default
+  EXPECT_DOUBLE_EQ(h.unhomed_jog_mm_s, 10.0);
+  EXPECT_TRUE(cfg.machine.allow_unhomed);
+}
+
+TEST(HomeConfig, WithHomingConfiguredAnAxisWithoutItNeedsAllowUnhomed) {
+  const auto e = config_errors(machine(kSwitch));
+  EXPECT_TRUE(any_contains(e, "axis Y has no homing")) << (e.empty() ? "" : e[0]);
+  EXPECT_TRUE(any_contains(e, "machine.allow_unhomed: true"));
+  // Explicit method none is the same, and allow_unhomed: false with no home section too.
+  EXPECT_TRUE(any_contains(config_errors(machine(kSwitch, "", "    - {name: Y, home: {method: none}}\n")),
+                           "axis Y has no homing"));
+  EXPECT_TRUE(any_contains(config_errors(machine("", "  allow_unhomed: false\n")), "axis X has no homing"));
+  // Absolute encoders are homed from the start.
+  const auto cfg = load_config_string(
+      machine(kSwitch, "", "    - {name: Y, home: {method: absolute, home_offset_mm: 12.5}}\n"));
+  EXPECT_FALSE(cfg.machine.allow_unhomed);
+  EXPECT_EQ(cfg.machine.axes[1].home.method, HomeConfig::Method::kAbsolute);
+  EXPECT_DOUBLE_EQ(cfg.machine.axes[1].home.home_offset_mm, 12.5);
+}
+
+TEST(HomeConfig, BadValuesAreRefusedWithTheirField) {
+  auto errs = [](const std::string& home) {
+    return config_errors(machine("      home: {" + home + "}\n", "  allow_unhomed: true\n"));
+  };
+  EXPECT_TRUE(any_contains(errs("method: drive"), "CiA 402 homing mode 6) is not supported yet"));
+  EXPECT_TRUE(any_contains(errs("method: switch, search_vel_mm_min: 0, latch_vel_mm_min: 60"),
+                           "search_vel_mm_min"));
+  EXPECT_TRUE(any_contains(errs("method: switch, search_vel_mm_min: -100, latch_vel_mm_min: 600"),
+                           "must not be faster than search_vel_mm_min"));
+  EXPECT_TRUE(any_contains(errs("method: switch, latch_vel_mm_min: 60"), "search_vel_mm_min"));
+  EXPECT_TRUE(any_contains(errs("method: switch, search_vel_mm_min: -100, latch_vel_mm_min: 60, "
+                                "home_position_mm: 500"),
+                           "home_position_mm"));
+  EXPECT_TRUE(any_contains(errs("method: switch, search_vel_mm_min: -100, latch_vel_mm_min: 60, speed: 3"),
+                           "speed"));
+  EXPECT_TRUE(any_contains(errs("method: magic"), "method"));
+}
+
+TEST(HomeConfig, TheSimulatedPowerUpPositionIsASimKey) {
+  const auto cfg = load_config_string(
+      "machine:\n  axes:\n    - {name: X, sim: {power_up_mm: -37.5}}\n");
+  EXPECT_DOUBLE_EQ(cfg.machine.axes[0].sim_power_up_mm, -37.5);
+}
+
+}  // namespace
