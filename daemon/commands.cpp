@@ -565,6 +565,17 @@ json Daemon::cmd_gains(const json& req) {
   return params_json();
 }
 
+namespace {
+
+// The reply of a jog on an axis that is not homed (homing required): no soft limits, and the speed
+// the loop really jogs at (home.unhomed_jog_mm_min at most).
+void unhomed_jog_reply(json& r, const config::AxisConfig& ax, double v_mm_min) {
+  r["not_homed"] = true;
+  r["velocity_mm_min"] = std::min(v_mm_min, ax.home.unhomed_jog_mm_s * 60.0);
+}
+
+}  // namespace
+
 json Daemon::cmd_jog(const json& req, const ClientInfo& client) {
   const int axis = axis_index(req.at("axis"), cfg_.machine);
   const double v = req.at("velocity_mm_min").get<double>();  // ranges: the command table
@@ -574,12 +585,18 @@ json Daemon::cmd_jog(const json& req, const ClientInfo& client) {
   }
   const auto st = loop_->status();
   const LiveLimits live = loop_->active_limits();
+  // Not homed while homing is required (issue 18): the axis' coordinates mean nothing yet, so its
+  // soft limits do not apply; the loop jogs it at home.unhomed_jog_mm_min at most.
+  const bool unhomed = !cfg_.machine.allow_unhomed && (st.homed_mask >> axis & 1u) == 0;
   double d = 0.0;
   if (continuous) {
     // Towards the soft limit (the loop's jog stops there); the dead-man brakes it before.
+    // Unhomed: one full travel (max_mm - min_mm), which the dead-man or `stop` ends.
     const auto ai = static_cast<std::size_t>(axis);
-    d = req.at("continuous").get<std::string>() == "+" ? live.max_mm[ai] - st.ref_mm[ai]
-                                                       : live.min_mm[ai] - st.ref_mm[ai];
+    const double travel = live.max_mm[ai] - live.min_mm[ai];
+    const bool plus = req.at("continuous").get<std::string>() == "+";
+    d = unhomed ? (plus ? travel : -travel)
+                : plus ? live.max_mm[ai] - st.ref_mm[ai] : live.min_mm[ai] - st.ref_mm[ai];
     if (std::abs(d) < 1e-6) {
       throw CommandError("jog: " + cfg_.machine.axes[ai].name + " is at its soft limit in that direction");
     }
@@ -596,7 +613,7 @@ json Daemon::cmd_jog(const json& req, const ClientInfo& client) {
   const auto& ax = cfg_.machine.axes[a];
   const LiveLimits lim = loop_->active_limits();
   const double target = st.ref_mm[a] + d;
-  if (target < lim.min_mm[a] || target > lim.max_mm[a]) {
+  if (!unhomed && (target < lim.min_mm[a] || target > lim.max_mm[a])) {
     throw CommandError("jog target " + std::to_string(target) + " mm outside the soft limits of " +
                        ax.name + " [" + std::to_string(lim.min_mm[a]) + ", " +
                        std::to_string(lim.max_mm[a]) + "]");
@@ -621,9 +638,13 @@ json Daemon::cmd_jog(const json& req, const ClientInfo& client) {
     spdlog::info("continuous jog {} {} at {} mm/min by client {} (pid {}): dead-man {} ms", ax.name,
                  req.at("continuous").get<std::string>(), v, client.id, client.pid,
                  cfg_.safety.jog_deadman_ms);
-    return {{"axis", ax.name}, {"target_mm", target}, {"deadman_ms", cfg_.safety.jog_deadman_ms}};
+    json r{{"axis", ax.name}, {"target_mm", target}, {"deadman_ms", cfg_.safety.jog_deadman_ms}};
+    if (unhomed) unhomed_jog_reply(r, ax, v);
+    return r;
   }
-  return {{"axis", ax.name}, {"target_mm", target}};
+  json r{{"axis", ax.name}, {"target_mm", target}};
+  if (unhomed) unhomed_jog_reply(r, ax, v);
+  return r;
 }
 
 std::string Daemon::unhomed_axes() const {

@@ -60,6 +60,13 @@ TEST(HomingDaemon, ProgramsWaitForHomingThenRunInMachineCoordinates) {
   EXPECT_EQ(d.ok({{"cmd", "status"}})["loaded_job"], 0) << "a refused run must not leave a program loaded";
   const json mdi = d.call({{"cmd", "mdi"}, {"text", "G0 X1"}});
   EXPECT_NE(mdi.value("error", std::string()).find("not homed"), std::string::npos) << mdi.dump();
+  // Unhomed jog: beyond the soft limit (its coordinates mean nothing yet), at the slow speed.
+  const json jog = d.ok({{"cmd", "jog"}, {"axis", "Y"}, {"velocity_mm_min", 3000}, {"distance_mm", -250.0}});
+  EXPECT_TRUE(jog["not_homed"].get<bool>()) << jog.dump();
+  EXPECT_DOUBLE_EQ(jog["velocity_mm_min"].get<double>(), 600.0);
+  d.wait_status([](const json& s) { return s["jogging"].get<bool>(); }, 300);
+  d.ok({{"cmd", "stop"}});
+  d.wait_status([](const json& s) { return !s["jogging"].get<bool>(); }, 300);
   const json bad = d.call({{"cmd", "home"}, {"axis", "X"}, {"position_mm", 0.0}});
   EXPECT_FALSE(bad.value("ok", true)) << "home no longer takes set-position's arguments";
 

@@ -256,11 +256,21 @@ config::Config homing_config() {
   return c;
 }
 
+// The loop rig on that machine, enabled.
+struct HomingRig {
+  config::Config cfg = homing_config();
+  test_rig::Rig rig{cfg};
+  bool enabled = false;
+  HomingRig() {
+    configure_sim_machine(rig.bus, cfg);
+    enabled = rig.enable();
+  }
+};
+
 TEST(HomingLoop, RunIsRefusedUntilHomedThenTheMachineCoordinatesAreTheTruePositions) {
-  const config::Config cfg = homing_config();
-  test_rig::Rig rig(cfg);
-  configure_sim_machine(rig.bus, cfg);
-  ASSERT_TRUE(rig.enable());
+  HomingRig h;
+  test_rig::Rig& rig = h.rig;
+  ASSERT_TRUE(h.enabled);
   EXPECT_EQ(rig.loop.status().homed_mask, 0u);
   // Not homed: the encoders read 0 where the axes powered up.
   EXPECT_NEAR(rig.loop.status().act_mm[0], 0.0, 1e-3);
@@ -301,10 +311,10 @@ TEST(HomingLoop, RunIsRefusedUntilHomedThenTheMachineCoordinatesAreTheTruePositi
 }
 
 TEST(HomingLoop, UnhomedJogIsSlowAndIgnoresTheSoftLimits) {
-  const config::Config cfg = homing_config();
-  test_rig::Rig rig(cfg);
-  configure_sim_machine(rig.bus, cfg);
-  ASSERT_TRUE(rig.enable());
+  HomingRig h;
+  test_rig::Rig& rig = h.rig;
+  const config::Config& cfg = h.cfg;
+  ASSERT_TRUE(h.enabled);
   // 300 mm down from the power-up position: past min_mm -200 in encoder coordinates.
   rig.loop.post({CommandKind::kJog, 0, 50.0, -300.0});
   rig.step(3);
@@ -323,10 +333,9 @@ TEST(HomingLoop, UnhomedJogIsSlowAndIgnoresTheSoftLimits) {
 }
 
 TEST(HomingLoop, StopAbortsHomingAndTheAxesStayUnhomed) {
-  const config::Config cfg = homing_config();
-  test_rig::Rig rig(cfg);
-  configure_sim_machine(rig.bus, cfg);
-  ASSERT_TRUE(rig.enable());
+  HomingRig h;
+  test_rig::Rig& rig = h.rig;
+  ASSERT_TRUE(h.enabled);
   rig.loop.post({CommandKind::kHome, -1});
   rig.step(200);
   ASSERT_TRUE(rig.loop.status().homing);
