@@ -239,6 +239,7 @@ bool ServoLoop::program_may_run() const noexcept {
 }
 
 void ServoLoop::update_effective_limits() noexcept {
+  limits_eff_dirty_ = false;
   limits_eff_ = limits_;
   for (int i = 0; i < axes_; ++i) {
     if (soft_limits_apply(i)) continue;
@@ -251,6 +252,7 @@ void ServoLoop::update_effective_limits() noexcept {
 void ServoLoop::cancel_homing() noexcept {
   if (!homing_.active()) return;
   homing_.cancel();
+  limits_eff_dirty_ = true;
   homing_failure_ = 5;
   homing_failure_axis_ = -1;
   emit(EventKind::kHomingFailed, FaultCause::kNone, -1, 0.0, 0.0, 5);
@@ -279,6 +281,7 @@ RefPoint ServoLoop::homing_step() noexcept {
     model_.reset();
     v_cmd_.fill(0.0);
     homing_.shifted(r.position_mm);
+    limits_eff_dirty_ = true;
   }
   if (!homing_.active()) {
     if (homing_.failed()) {
@@ -297,6 +300,7 @@ RefPoint ServoLoop::homing_step() noexcept {
       }
     }
     homing_was_active_ = false;
+    limits_eff_dirty_ = true;
   }
   return r;
 }
@@ -470,6 +474,7 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       }
       homing_.start(plan, axes_, ref_);
       homing_was_active_ = true;
+      limits_eff_dirty_ = true;
       ++homing_runs_;
       homing_failure_ = 0;
       homing_failure_axis_ = -1;
@@ -687,6 +692,7 @@ void ServoLoop::take_staged() noexcept {
   }
   if (staged_limits_ready_.load(std::memory_order_acquire)) {
     limits_ = staged_limits_;
+    limits_eff_dirty_ = true;
     limits_generation_ = staged_limits_generation_.load(std::memory_order_relaxed);
     staged_limits_ready_.store(false, std::memory_order_release);
     emit(EventKind::kLimitsSwapped, FaultCause::kNone, -1, static_cast<double>(limits_generation_));
@@ -767,7 +773,7 @@ RefPoint ServoLoop::reference(MachineState st, bool servo) noexcept {
   ref_prev_ = ref_;
   program_.drain();  // READY too: the interpolator is pre-filled before `run`
   if (homing_.active() && st != MachineState::kReady) cancel_homing();
-  update_effective_limits();
+  if (limits_eff_dirty_) update_effective_limits();
   const SourceKind next = select_source(st);
   if (next != source_ && next == SourceKind::kHold) hold_.start(ref_);  // switch at the boundary
   source_ = next;

@@ -391,6 +391,7 @@ class ServoLoop {
   std::uint8_t homing_failure_ = 0;
   int homing_failure_axis_ = -1;
   LiveLimits limits_eff_{};
+  bool limits_eff_dirty_ = true;  // recomputed at the next reference stage (swap, homing change)
   StopSource stop_;
   SourceKind source_ = SourceKind::kHold;
   ForceChannel force_;
