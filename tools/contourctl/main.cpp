@@ -595,8 +595,9 @@ int main(int argc, char** argv) {
                   "this client goes away (dead-man)")
       ->check(CLI::IsMember({"+", "-"}));
   auto* home = app.add_subcommand(
-      "home", "home AXIS, or home --all: switch search, latch, move to the home position, in "
-              "home.sequence order; prints the progress and waits until homed (Ctrl-C / stop aborts)");
+      "home", summary("home", "home AXIS, or home --all: switch search, latch, move to the home "
+                              "position, in home.sequence order; prints the progress and waits "
+                              "until homed (stop aborts)"));
   home->add_option("AXIS", home_axis);
   home->add_flag("--all", home_all, "every axis with a homing method");
   auto* setpos =
