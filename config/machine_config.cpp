@@ -5,15 +5,6 @@
 
 namespace contour::config {
 
-const char* to_string(HomeConfig::Method m) noexcept {
-  switch (m) {
-    case HomeConfig::Method::kNone: return "none";
-    case HomeConfig::Method::kSwitch: return "switch";
-    case HomeConfig::Method::kAbsolute: return "absolute";
-  }
-  return "?";
-}
-
 namespace {
 
 void parse_home(Section& a, AxisConfig& ax) {

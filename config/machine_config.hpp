@@ -42,7 +42,6 @@ struct HomeConfig {
   double search_distance_mm = 0.0;  // the switch must close within this travel (default 1.2 x range)
   double unhomed_jog_mm_s = 10.0;   // jog speed limit while not homed (no soft limits then)
 };
-const char* to_string(HomeConfig::Method m) noexcept;
 
 struct AxisConfig {
   std::string name;             // "X", "Y", "Z"

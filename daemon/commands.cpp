@@ -85,15 +85,8 @@ json Daemon::counters_json(const LoopStatus& st) const {
 
 namespace {
 
-std::string homing_failure_text(const LoopStatus& st, const config::MachineConfig& m) {
-  std::string t;
-  switch (st.homing_failure) {
-    case 1: t = "the drive reports no digital inputs (0x60FD): no home switch"; break;
-    case 2: t = "the home switch did not close within search_distance_mm"; break;
-    case 3: t = "the home switch did not open again within search_distance_mm"; break;
-    case 4: t = "the home switch did not close again on the latch approach"; break;
-    default: t = "aborted (stop, or the machine left READY) before every axis latched"; break;
-  }
+std::string homing_failure_status(const LoopStatus& st, const config::MachineConfig& m) {
+  std::string t = homing_failure_text(st.homing_failure);
   const auto a = static_cast<std::size_t>(st.homing_failure_axis);
   if (st.homing_failure_axis >= 0 && a < m.axes.size()) t = m.axes[a].name + ": " + t;
   return t;
@@ -123,7 +116,7 @@ json Daemon::status_json() {
                      {"phase", phases},
                      {"required", !cfg_.machine.allow_unhomed},
                      {"runs", st.homing_runs},
-                     {"failure", st.homing_failure == 0 ? json() : json(homing_failure_text(st, cfg_.machine))},
+                     {"failure", st.homing_failure == 0 ? json() : json(homing_failure_status(st, cfg_.machine))},
                      {"machine_minus_encoder_mm", shifts}}},
          {"source", to_string(st.source)},
          {"cycle", st.cycle},

@@ -163,13 +163,8 @@ std::string describe(const RtEvent& e) {
     case EventKind::kHomingFailed:
       o << "HOMING FAILED";
       if (e.axis >= 0) o << " axis " << e.axis;
-      switch (e.detail) {
-        case 1: o << ": the drive reports no digital inputs (0x60FD): no home switch"; break;
-        case 2: o << ": the home switch did not close within search_distance_mm (" << e.value << " mm travelled)"; break;
-        case 3: o << ": the home switch did not open again within search_distance_mm"; break;
-        case 4: o << ": the home switch did not close again on the latch approach"; break;
-        default: o << ": aborted (stop, or the machine left READY) before every axis latched"; break;
-      }
+      o << ": " << homing_failure_text(e.detail);
+      if (e.detail == 2) o << " (" << e.value << " mm travelled)";
       break;
     case EventKind::kStandstillTimeout:
       o << "STANDSTILL TIMEOUT: axis " << e.axis << " still ";

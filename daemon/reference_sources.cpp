@@ -214,6 +214,16 @@ const char* to_string(HomingSource::Phase p) noexcept {
   return "?";
 }
 
+const char* homing_failure_text(std::uint8_t code) noexcept {
+  switch (code) {
+    case 1: return "the drive reports no digital inputs (0x60FD): no home switch";
+    case 2: return "the home switch did not close within search_distance_mm";
+    case 3: return "the home switch did not open again within search_distance_mm";
+    case 4: return "the home switch did not close again on the latch approach";
+    default: return "aborted (stop, or the machine left READY) before every axis latched";
+  }
+}
+
 void HomingSource::start(const std::array<AxisPlan, kMaxAxes>& plan, int axes,
                          const Eigen::Vector3d& ref_mm) noexcept {
   plan_ = plan;
@@ -226,7 +236,6 @@ void HomingSource::start(const std::array<AxisPlan, kMaxAxes>& plan, int axes,
     if (plan_[static_cast<std::size_t>(i)].home) homing_mask_ |= 1u << i;
   }
   failed_axis_ = -1;
-  failure_ = "";
   failure_code_ = 0;
   shift_pending_ = false;
   group_ = -1;
@@ -258,10 +267,9 @@ void HomingSource::start_group() noexcept {
   }
 }
 
-void HomingSource::fail(int axis, std::uint8_t code, const char* why, double value) noexcept {
+void HomingSource::fail(int axis, std::uint8_t code, double value) noexcept {
   if (failed_axis_ < 0) {
     failed_axis_ = axis;
-    failure_ = why;
     failure_code_ = code;
     failure_value_ = value;
   }
@@ -320,11 +328,11 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
     switch (ph) {
       case Phase::kSearch:
         if (!ax.digital_inputs_present) {
-          fail(i, 1, "the drive reports no digital inputs (0x60FD): no home switch to search", 0.0);
+          fail(i, 1, 0.0);
         } else if (edge_ok && sw) {
           phase_[a] = Phase::kBrakeSearch;
         } else if (travelled > p.search_distance_mm) {
-          fail(i, 2, "the home switch did not close within search_distance_mm", travelled);
+          fail(i, 2, travelled);
         }
         ramp(a, phase_[a] == Phase::kSearch ? p.search_mm_s : 0.0, acc, period_s);
         break;
@@ -342,7 +350,7 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
           if (release_latch) latch_mm_[a] = fb.act_mm[i];
           phase_[a] = Phase::kBrakeBackoff;
         } else if (travelled > p.search_distance_mm) {
-          fail(i, 3, "the home switch did not open again within search_distance_mm", travelled);
+          fail(i, 3, travelled);
         }
         ramp(a, phase_[a] == Phase::kBackoff ? -search_dir * std::abs(p.latch_mm_s) : 0.0, acc, period_s);
         break;
@@ -359,7 +367,7 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
           latch_mm_[a] = fb.act_mm[i];
           phase_[a] = Phase::kBrakeLatch;
         } else if (travelled > p.search_distance_mm) {
-          fail(i, 4, "the home switch did not close again on the latch approach", travelled);
+          fail(i, 4, travelled);
         }
         ramp(a, phase_[a] == Phase::kApproach ? p.latch_mm_s : 0.0, acc, period_s);
         break;

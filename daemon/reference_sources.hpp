@@ -178,12 +178,10 @@ class HomingSource {
   [[nodiscard]] double latch_mm(int axis) const noexcept { return latch_mm_[static_cast<std::size_t>(axis)]; }
   [[nodiscard]] double offset_mm(int axis) const noexcept { return plan_[static_cast<std::size_t>(axis)].offset_mm; }
   void shifted(const Eigen::Vector3d& ref_mm) noexcept;
-  // Ended by a failure: the axis and its reason (a static string).
+  // Ended by a failure: the axis, and its code (homing_failure_text; EventKind::kHomingFailed's
+  // detail).
   [[nodiscard]] bool failed() const noexcept { return failed_axis_ >= 0; }
   [[nodiscard]] int failed_axis() const noexcept { return failed_axis_; }
-  [[nodiscard]] const char* failure() const noexcept { return failure_; }
-  // EventKind::kHomingFailed's detail: 1 no inputs, 2 switch never closed, 3 never opened,
-  // 4 never closed on the latch approach.
   [[nodiscard]] std::uint8_t failure_code() const noexcept { return failure_code_; }
   [[nodiscard]] double failure_value() const noexcept { return failure_value_; }
   [[nodiscard]] Phase phase(int axis) const noexcept { return phase_[static_cast<std::size_t>(axis)]; }
@@ -192,7 +190,7 @@ class HomingSource {
 
  private:
   void start_group() noexcept;
-  void fail(int axis, std::uint8_t code, const char* why, double value) noexcept;
+  void fail(int axis, std::uint8_t code, double value) noexcept;
   // One velocity-ramp step of axis a towards v_target; returns the new velocity.
   void ramp(std::size_t a, double v_target, double acc, double period_s) noexcept;
 
@@ -209,11 +207,14 @@ class HomingSource {
   bool active_ = false;
   bool shift_pending_ = false;
   int failed_axis_ = -1;
-  const char* failure_ = "";
   std::uint8_t failure_code_ = 0;
   double failure_value_ = 0.0;
 };
 const char* to_string(HomingSource::Phase p) noexcept;
+// Why homing ended without homing (the log, status.homing.failure): 1 no digital inputs, 2 the
+// switch did not close within search_distance_mm, 3 did not open again, 4 did not close again on
+// the latch approach, anything else aborted (the loop's code 5: stop, or the machine left READY).
+const char* homing_failure_text(std::uint8_t code) noexcept;
 
 // Standstill. Servoing (READY): the reference stays at the position given to start(). Not
 // servoing (DISABLED, ENABLING, ESTOP): the reference follows the measured position, so that the

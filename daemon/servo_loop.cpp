@@ -496,7 +496,7 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       // with SDOs and must not be called here (its adapter refuses: returns false).
       if ((st != MachineState::kReady && st != MachineState::kDisabled) || program_.attached() ||
           jog_.active() || homing_.active() || c.axis < 0 || c.axis >= axes_ ||
-          !bus_.set_position(c.axis, c.a - home_shift_mm_[static_cast<std::size_t>(c.axis < 0 ? 0 : c.axis)])) {
+          !bus_.set_position(c.axis, c.a - home_shift_mm_[static_cast<std::size_t>(c.axis)])) {
         refuse();
         break;
       }
