@@ -113,19 +113,28 @@ double ChatterMonitor::window_clamps_per_s(int axis) const noexcept {
          (static_cast<double>(n) * p_.period_s);
 }
 
-void ChatterMonitor::window_figures(std::array<double, kChatterMaxAxes>& chatter_mm_s,
-                                    std::array<double, kChatterMaxAxes>& clamps_per_s) const noexcept {
-  chatter_mm_s.fill(0.0);
-  clamps_per_s.fill(0.0);
-  const std::int64_t n = window_samples();
-  if (n <= 0) return;
-  const double inv_n = 1.0 / static_cast<double>(n);
-  const double inv_s = inv_n / p_.period_s;
+ChatterWindowSums ChatterMonitor::window_sums() const noexcept {
+  ChatterWindowSums w;
+  w.samples = window_samples();
+  w.period_s = p_.period_s;
   for (int i = 0; i < axes_; ++i) {
     const auto s = static_cast<std::size_t>(i);
-    const Axis& a = ax_[s];
-    chatter_mm_s[s] = std::sqrt((a.done_sq + a.cur_sq) * inv_n);
-    clamps_per_s[s] = static_cast<double>(a.done_clamps + a.cur_clamps) * inv_s;
+    w.sq_mm2_s2[s] = ax_[s].done_sq + ax_[s].cur_sq;
+    w.clamps[s] = ax_[s].done_clamps + ax_[s].cur_clamps;
+  }
+  return w;
+}
+
+void window_figures(const ChatterWindowSums& w, std::array<double, kChatterMaxAxes>& chatter_mm_s,
+                    std::array<double, kChatterMaxAxes>& clamps_per_s) noexcept {
+  chatter_mm_s.fill(0.0);
+  clamps_per_s.fill(0.0);
+  if (w.samples <= 0 || !(w.period_s > 0.0)) return;
+  const double inv_n = 1.0 / static_cast<double>(w.samples);
+  const double inv_s = inv_n / w.period_s;
+  for (std::size_t s = 0; s < chatter_mm_s.size(); ++s) {
+    chatter_mm_s[s] = std::sqrt(w.sq_mm2_s2[s] * inv_n);
+    clamps_per_s[s] = static_cast<double>(w.clamps[s]) * inv_s;
   }
 }
 
@@ -165,7 +174,9 @@ ChatterReport ChatterMonitor::update(const std::array<double, kChatterMaxAxes>& 
   }
 
   ChatterReport out;
-  const bool judged = blocks_done_ >= kBlocks - 1;
+  // Before a full window nothing is judged: the counters and levels are still as reset() left
+  // them (they change only while judged, and only reset() empties the window again).
+  if (blocks_done_ < kBlocks - 1) return out;
   // Judged on the window sums against thresholds scaled to the window (no square root or
   // division per cycle); the figures themselves are computed only for a report.
   const auto n = static_cast<double>(window_samples());
@@ -179,8 +190,14 @@ ChatterReport ChatterMonitor::update(const std::array<double, kChatterMaxAxes>& 
     Axis& a = ax_[s];
     const double sq = a.done_sq + a.cur_sq;
     const auto clamps = static_cast<double>(a.done_clamps + a.cur_clamps);
-    const bool warn = judged && (sq > warn_sq || clamps > warn_clamps);
-    const bool fault = judged && (sq > fault_sq || clamps > fault_clamps);
+    const bool warn = (sq > warn_sq || clamps > warn_clamps);
+    // The common case, exactly: below the warning thresholds (and so below the fault ones, which
+    // configure() keeps at or above them) with nothing counted and nothing raised, this cycle
+    // changes nothing and reports nothing.
+    if (!warn && a.warn_cycles == 0 && a.fault_cycles == 0 && level_[s] == ChatterLevel::kOk) {
+      continue;
+    }
+    const bool fault = (sq > fault_sq || clamps > fault_clamps);
     a.warn_cycles = warn ? a.warn_cycles + 1 : 0;
     a.fault_cycles = fault ? a.fault_cycles + 1 : 0;
     bool raised = false;
@@ -199,8 +216,8 @@ ChatterReport ChatterMonitor::update(const std::array<double, kChatterMaxAxes>& 
       out.level = level_[s];
       out.raised = raised;
       out.axis = i;
-      const double chatter = judged ? window_chatter_mm_s(i) : 0.0;
-      const double rate = judged ? window_clamps_per_s(i) : 0.0;
+      const double chatter = window_chatter_mm_s(i);
+      const double rate = window_clamps_per_s(i);
       const bool fault_level = level_[s] == ChatterLevel::kFault;
       const double chatter_limit = fault_level ? p_.fault_chatter_mm_s : p_.warn_chatter_mm_s;
       const double rate_limit = fault_level ? p_.fault_clamps_per_s : p_.warn_clamps_per_s;

@@ -69,6 +69,19 @@ struct ChatterMonitorParams {
   double fault_time_s = 0.5;
 };
 
+// The watchdog's raw window (what update() judges on): cheap to copy every cycle into a
+// published status; the figures (a square root and a division per axis) are derived by the
+// reader with window_figures() below.
+struct ChatterWindowSums {
+  std::array<double, kChatterMaxAxes> sq_mm2_s2{};  // sum of (v(k) - v(k-1))^2 over the window
+  std::array<std::int64_t, kChatterMaxAxes> clamps{};
+  std::int64_t samples = 0;
+  double period_s = 0.001;
+};
+// RMS |dv| (mm/s) and clamped cycles per second of each axis (0 for an empty window).
+void window_figures(const ChatterWindowSums& s, std::array<double, kChatterMaxAxes>& chatter_mm_s,
+                    std::array<double, kChatterMaxAxes>& clamps_per_s) noexcept;
+
 enum class ChatterLevel : std::uint8_t { kOk = 0, kWarning, kFault };
 enum class ChatterFigureKind : std::uint8_t { kNone = 0, kChatter, kClampRate };
 
@@ -105,10 +118,8 @@ class ChatterMonitor {
   // Current window figures of one axis (0 before the first difference).
   [[nodiscard]] double window_chatter_mm_s(int axis) const noexcept;
   [[nodiscard]] double window_clamps_per_s(int axis) const noexcept;
-  // Both figures for every axis at once (zeros past the configured axes): one division, for
-  // the per-cycle status.
-  void window_figures(std::array<double, kChatterMaxAxes>& chatter_mm_s,
-                      std::array<double, kChatterMaxAxes>& clamps_per_s) const noexcept;
+  // The window's sums (zeros past the configured axes), for a status published every cycle.
+  [[nodiscard]] ChatterWindowSums window_sums() const noexcept;
   [[nodiscard]] ChatterLevel level(int axis) const noexcept {
     return level_[static_cast<std::size_t>(axis)];
   }

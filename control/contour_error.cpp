@@ -92,7 +92,10 @@ void ContourErrorModel::configure(const ContourErrorParams& p) {
     throw std::invalid_argument("contour error model: window_capacity must be >= 4");
   }
   p_ = p;
-  ring_.assign(static_cast<std::size_t>(p.window_capacity), Vec3::Zero());
+  std::size_t slots = 4;
+  while (slots < static_cast<std::size_t>(p.window_capacity)) slots *= 2;
+  ring_.assign(slots, Vec3::Zero());
+  mask_ = slots - 1;
   reset();
 }
 
@@ -107,8 +110,8 @@ void ContourErrorModel::push_reference(const Vec3& r_mm) noexcept {
   if (!r_mm.allFinite()) return;
   if (newest_ >= oldest_ && (r_mm - at(newest_)).norm() < kMinSpacing_mm) return;
   ++newest_;
-  ring_[static_cast<std::size_t>(newest_ % static_cast<std::int64_t>(ring_.size()))] = r_mm;
-  if (newest_ - oldest_ + 1 > static_cast<std::int64_t>(ring_.size())) {
+  ring_[static_cast<std::size_t>(newest_) & mask_] = r_mm;
+  if (newest_ - oldest_ + 1 > static_cast<std::int64_t>(p_.window_capacity)) {
     ++oldest_;
     // The window lost its first point: the lag exceeds the capacity. Force it forward.
     if (centre_ - 1 < oldest_) {

@@ -110,8 +110,11 @@ class ContourErrorModel {
   [[nodiscard]] std::int64_t stored_points() const noexcept { return newest_ - oldest_ + 1; }
 
  private:
+  // The ring's storage is the next power of two >= window_capacity, so an absolute index maps
+  // to its slot with a mask (a 64-bit division per access cost more than the model's arithmetic);
+  // how many points are kept is still window_capacity.
   [[nodiscard]] const Vec3& at(std::int64_t i) const noexcept {
-    return ring_[static_cast<std::size_t>(i % static_cast<std::int64_t>(ring_.size()))];
+    return ring_[static_cast<std::size_t>(i) & mask_];
   }
   ContourErrorResult circle_model(const Vec3& p) noexcept;
   ContourErrorResult nearest_model(const Vec3& p) const noexcept;
@@ -119,6 +122,7 @@ class ContourErrorModel {
 
   ContourErrorParams p_{};
   std::vector<Vec3> ring_;
+  std::size_t mask_ = 0;  // ring_.size() - 1 (a power of two)
   std::int64_t oldest_ = 0;
   std::int64_t newest_ = -1;  // absolute index of the newest point; -1 = empty
   std::int64_t centre_ = 0;   // absolute index of R(c)

@@ -49,7 +49,7 @@ class FeedDrive {
     if (p_.delay_cycles > 0) {
       applied = delay_[static_cast<std::size_t>(head_)];
       delay_[static_cast<std::size_t>(head_)] = u;
-      head_ = (head_ + 1) % p_.delay_cycles;
+      if (++head_ == p_.delay_cycles) head_ = 0;  // (no division per step)
     }
     const double x = x_mm_ + c_x_ * v_mm_s_ + d_x_ * applied;
     v_mm_s_ = a_ * v_mm_s_ + b_v_ * applied;
@@ -63,7 +63,7 @@ class FeedDrive {
   // RT: noexcept, O(1).
   void correct_last_command(double du_mm) noexcept {
     if (p_.delay_cycles > 0) {
-      const int last = (head_ + p_.delay_cycles - 1) % p_.delay_cycles;
+      const int last = head_ == 0 ? p_.delay_cycles - 1 : head_ - 1;
       delay_[static_cast<std::size_t>(last)] += du_mm;
       return;
     }

@@ -99,7 +99,7 @@ bool Interpolator::push(const PlannedSegment& seg) noexcept {
     shift_ += from - s.start_cycle;
     s.start_cycle = from;
   }
-  ring_[(head_ + count_) % cap_] = s;
+  ring_[slot(count_)] = s;
   ++count_;
   return true;
 }
@@ -149,8 +149,7 @@ void Interpolator::drop_finished(std::int64_t t) noexcept {
     last_.mist = s.mist;
     last_.flood = s.flood;
     last_.tool = s.tool;
-    head_ = (head_ + 1) % cap_;
-    --count_;
+    pop_front();
   }
 }
 
@@ -177,8 +176,7 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
     }
     // Leave the hold marker behind.
     holding_ = resumed_hold_ = false;
-    head_ = (head_ + 1) % cap_;
-    --count_;
+    pop_front();
     last_.message_id = -1;
     set_hold_marker(nullptr);
   }
@@ -218,8 +216,7 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
         // Marker is the first non-motion entry; all motion before it has finished at `limit`.
         drop_finished(static_cast<std::int64_t>(limit));
         if (count_ > 0 && at(0).kind == SegmentKind::kOptionalHold) {
-          head_ = (head_ + 1) % cap_;
-          --count_;
+          pop_front();
         }
       } else if (marker->kind == SegmentKind::kSpindleSync) {
         st = InterpStatus::kSpindleWait;

@@ -156,7 +156,17 @@ class Interpolator {
                                             int* line = nullptr) const noexcept;
 
  private:
-  const PlannedSegment& at(std::size_t i) const noexcept { return ring_[(head_ + i) % cap_]; }
+  // Ring slot of queue entry i (i < count_ <= cap_: one subtraction; no division per access).
+  [[nodiscard]] std::size_t slot(std::size_t i) const noexcept {
+    std::size_t k = head_ + i;
+    while (k >= cap_) k -= cap_;
+    return k;
+  }
+  void pop_front() noexcept {
+    if (++head_ == cap_) head_ = 0;
+    --count_;
+  }
+  const PlannedSegment& at(std::size_t i) const noexcept { return ring_[slot(i)]; }
   void drop_finished(std::int64_t t) noexcept;
 
   InterpolatorParams p_;

@@ -159,8 +159,12 @@ ServoStatus ServoController::update(const Vec3& r_mm, const Vec3& p_hat_mm,
   // eps of P_tilde, as eps plus the difference on the model's geometry (robust to a result whose
   // geometry fields are not filled in, e.g. hand-made in tests: then eps_d = eps - shift).
   Vec3 eps_d = eps;
+  Vec3 eps_tilde;  // eps_on(ce, p_tilde), computed at most once per cycle
+  bool have_eps_tilde = false;
   if (p_.derivative.model_blend_s > 0.0) {
-    eps_d += eps_on(ce, p_tilde) - eps_on(ce, p_hat_mm);
+    eps_tilde = eps_on(ce, p_tilde);
+    have_eps_tilde = true;
+    eps_d += eps_tilde - eps_on(ce, p_hat_mm);
     if (!eps_d.allFinite()) eps_d = eps;
   }
   if (first_) {
@@ -176,7 +180,8 @@ ServoStatus ServoController::update(const Vec3& r_mm, const Vec3& p_hat_mm,
   Vec3 eps_d_prev = eps_prev_;
   const SameGeometry sg = p_.derivative.same_geometry;
   if (sg == SameGeometry::kAlways || (sg == SameGeometry::kAhead && ce.lag_points <= 1)) {
-    eps_d_prev = eps_d + eps_on(ce, p_tilde_prev_) - eps_on(ce, p_tilde);
+    if (!have_eps_tilde) eps_tilde = eps_on(ce, p_tilde);
+    eps_d_prev = eps_d + eps_on(ce, p_tilde_prev_) - eps_tilde;
     if (!eps_d_prev.allFinite()) eps_d_prev = eps_prev_;
   }
   p_tilde_prev_ = p_tilde;

@@ -50,10 +50,9 @@ void ProgramSource::resume() noexcept {
 
 void ProgramSource::drain() noexcept {
   if (job_ == nullptr) return;
-  SegmentRecord rec;
-  for (int n = 0; n < kMaxSegmentsPerCycle && job_->interp.free_slots() > 0 && job_->queue.pop(rec);
+  for (int n = 0; n < kMaxSegmentsPerCycle && job_->interp.free_slots() > 0 && job_->queue.pop(rec_);
        ++n) {
-    from_record(rec, seg_);
+    from_record(rec_, seg_);
     job_->interp.push(seg_);
   }
 }

@@ -114,6 +114,15 @@ FaultReport SafetySupervisor::check_bus(const Feedback& fb, bool servo) const no
   // TPDOs, and the FAULT's cause must be the event, not the silence that follows it. An EMCY
   // alone is a warning (drives report temperature or voltage warnings that way): it becomes the
   // cause when the drive then stops following (fault bit, disabled, TPDOs missing).
+  // The common case first, in one pass: nothing below can fire (the order of the causes only
+  // matters when one does).
+  bool any = fb.bus.spindle.fault || fb.bus.heartbeat_lost || fb.bus.bus_error;
+  for (int i = 0; i < axes_; ++i) {
+    const AxisFeedback& ax = fb.bus.axis[static_cast<std::size_t>(i)];
+    any = any || ax.fault || ax.nmt_lost || (servo && ax.fresh && !ax.enabled) ||
+          fb.missed_streak[static_cast<std::size_t>(i)] >= missed_tpdo_streak_;
+  }
+  if (!any) return {};
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
     const AxisFeedback& ax = fb.bus.axis[a];

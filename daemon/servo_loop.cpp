@@ -673,6 +673,7 @@ void ServoLoop::cycle() noexcept {
   v_ref_ = (ref_ - ref_prev_) / period_s_;  // control, following error, a stop's start
   double eps_norm = 0.0;
   AxisCommands out = control_step(r, st, servo, v_ref_, eps_norm);
+  eps_norm_ = eps_norm;
   channels(st, out);
   write(out);
   last_servo_ = servo;
@@ -1104,8 +1105,10 @@ void ServoLoop::watch_chatter(bool servo) noexcept {
 }
 
 void ServoLoop::publish_cycle() noexcept {
-  const int dec = std::max(1, cfg_.telemetry.decimation);
-  if (cycle_ % static_cast<std::uint64_t>(dec) == 0) {
+  // Every `decimation`-th cycle, from cycle 0 (a countdown: no division per cycle).
+  const bool sample = telemetry_phase_ == 0;
+  if (++telemetry_phase_ >= std::max(1, cfg_.telemetry.decimation)) telemetry_phase_ = 0;
+  if (sample) {
     const control::InterpOutput& io = program_.output();
     TelemetrySample s;
     s.cycle = cycle_;
@@ -1149,7 +1152,7 @@ void ServoLoop::publish() noexcept {
     pub_.act_mm[i] = fb_.act_mm[static_cast<Eigen::Index>(i)];
     pub_.cmd_mm_s[i] = v_cmd_[i];
   }
-  pub_.eps_norm_mm = eps_.norm();
+  pub_.eps_norm_mm = eps_norm_;
   pub_.progress_mm = io.path_progress_mm;
   pub_.line = io.line;
   pub_.override_applied = io.override_applied;
@@ -1190,15 +1193,13 @@ void ServoLoop::publish() noexcept {
   pub_.accel_clamps = accel_clamps_;
   {
     std::uint8_t lvl = 0;
-    chatter_mon_.window_figures(pub_.chatter_window_mm_s, pub_.chatter_window_clamps_per_s);
+    pub_.chatter_window_sums = chatter_mon_.window_sums();
     for (int i = 0; i < axes_; ++i) {
       lvl = std::max(lvl, static_cast<std::uint8_t>(chatter_mon_.level(i)));
     }
     pub_.chatter_level = lvl;
-    const control::ChatterFigure jf = job_chatter_.figure();
     pub_.chatter_job = job_chatter_id_;
-    pub_.job_chatter_rms_mm_s = jf.rms_mm_s;
-    pub_.job_chatter_max_mm_s = jf.max_mm_s;
+    pub_.job_chatter_meter = job_chatter_;
   }
   pub_.limits_generation = limits_generation_;
   pub_.force_available = force_.configured();
@@ -1265,8 +1266,14 @@ LoopStatus ServoLoop::status() const noexcept {
     }
     out = pub_;
     std::atomic_thread_fence(std::memory_order_acquire);
-    if (seq_.load(std::memory_order_relaxed) == s0) return out;
+    if (seq_.load(std::memory_order_relaxed) == s0) break;
   }
+  control::window_figures(out.chatter_window_sums, out.chatter_window_mm_s,
+                          out.chatter_window_clamps_per_s);
+  const control::ChatterFigure jf = out.job_chatter_meter.figure();
+  out.job_chatter_rms_mm_s = jf.rms_mm_s;
+  out.job_chatter_max_mm_s = jf.max_mm_s;
+  return out;
 }
 
 void ServoLoop::run(const std::atomic<bool>& stop) noexcept {

@@ -199,7 +199,10 @@ struct LoopStatus {
   std::uint64_t limits_generation = 0;
   // Command chatter (issue 16, control/chatter_monitor.hpp): the watchdog's sliding-window figures
   // per axis, and the RMS/max of |v(k) - v(k-1)| over the program chatter_job (the running one,
-  // else the last one that ran).
+  // else the last one that ran). The loop publishes the raw sums; status() derives the figures
+  // (square roots and divisions are the reader's work, not the cycle's).
+  control::ChatterWindowSums chatter_window_sums{};
+  control::ChatterMeter job_chatter_meter{};
   std::array<double, 3> chatter_window_mm_s{};
   std::array<double, 3> chatter_window_clamps_per_s{};
   std::uint8_t chatter_level = 0;  // control::ChatterLevel: 0 ok, 1 warning, 2 fault
@@ -429,6 +432,8 @@ class ServoLoop {
   Eigen::Vector3d ref_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d ref_prev_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d eps_ = Eigen::Vector3d::Zero();
+  double eps_norm_ = 0.0;
+  int telemetry_phase_ = 0;  // cycle_ modulo telemetry.decimation  // |eps_| of this cycle (computed once, by control_step)
   std::array<double, 3> v_cmd_{};
   std::array<bool, 3> clamped_{};  // this cycle's command was clamped (velocity or acceleration)
   control::ChatterMonitor chatter_mon_;

@@ -104,6 +104,28 @@ TEST(ChatterMonitor, ClampRateAloneRaisesIt) {
   EXPECT_NEAR(last.value, 500.0, 20.0);
 }
 
+// The loop publishes the raw window sums every cycle and the status reader derives the figures
+// from them: the derived figures are the monitor's own, axis by axis, mid-block included.
+TEST(ChatterMonitor, FiguresDerivedFromThePublishedSumsAreTheMonitorsOwn) {
+  ChatterMonitor m;
+  m.configure(ChatterMonitorParams{}, 2);
+  std::array<double, kChatterMaxAxes> chatter{}, rate{};
+  window_figures(m.window_sums(), chatter, rate);
+  EXPECT_EQ(chatter, (V3{0.0, 0.0, 0.0}));  // empty window
+  for (int k = 0; k < 137; ++k) {
+    m.update({k % 2 == 0 ? 3.0 : -3.0, 0.5 * k, 99.0}, {k % 3 == 0, false, true});
+  }
+  window_figures(m.window_sums(), chatter, rate);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_DOUBLE_EQ(chatter[static_cast<std::size_t>(i)], m.window_chatter_mm_s(i)) << i;
+    EXPECT_DOUBLE_EQ(rate[static_cast<std::size_t>(i)], m.window_clamps_per_s(i)) << i;
+  }
+  EXPECT_NEAR(chatter[0], 6.0, 1e-12);  // |dv| = 6 every cycle
+  EXPECT_GT(rate[0], 0.0);
+  EXPECT_EQ(chatter[2], 0.0);  // past the configured axes
+  EXPECT_EQ(rate[2], 0.0);
+}
+
 TEST(ChatterMonitor, ShortBurstBelowTheTimesIsIgnoredAndWarningClears) {
   // A corner transient: 60 ms of heavy chatter, then quiet: neither warning (0.25 s) nor fault.
   ChatterMonitor m;
