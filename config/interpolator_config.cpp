@@ -25,6 +25,8 @@ InterpolatorConfig parse_interpolator(Section& s) {
   c.tolerance_um = s.number("tolerance_um", c.tolerance_um, 0.1, 10000.0);
   c.arc_chord_fraction = s.number("arc_chord_fraction", c.arc_chord_fraction, 0.01, 0.9);
   c.feed_override_max_percent = s.number("feed_override_max_percent", c.feed_override_max_percent, 0.0, 300.0);
+  c.rapid_override_max_percent =
+      s.number("rapid_override_max_percent", c.rapid_override_max_percent, 1.0, 100.0);
   c.floor_rounding = s.choice("rounding", "ceil", {"ceil", "floor"}) == "floor";
   const std::string m = s.choice("method", "true", {"true", "paper", "exhaustive"});
   c.method = m == "paper" ? control::BlendMethod::kPaper

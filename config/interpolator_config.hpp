@@ -6,6 +6,7 @@
 //   tolerance_um: 50       default G64 P tolerance (and the arc chord budget base)
 //   arc_chord_fraction: 0.25  arcs become chords with sagitta <= fraction * tolerance
 //   feed_override_max_percent: 150
+//   rapid_override_max_percent: 100   rapid override ceiling (G0 runs at most at its planned speed)
 //   rounding: ceil         block sample counts: ceil (never faster than F) | floor (paper)
 //   method: true           blend search: true (verified true-path tolerance) | paper | exhaustive
 //   optional_stop: false   M1 holds when true
@@ -25,6 +26,7 @@ struct InterpolatorConfig {
   double tolerance_um = 50.0;
   double arc_chord_fraction = 0.25;
   double feed_override_max_percent = 150.0;
+  double rapid_override_max_percent = 100.0;  // 1..100 (LinuxCNC: rapids never above 100 %)
   bool floor_rounding = false;
   control::BlendMethod method = control::BlendMethod::kTrue;
   bool optional_stop = false;

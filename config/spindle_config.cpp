@@ -27,6 +27,8 @@ SpindleConfig parse_spindle(Section& s) {
                       : wait == "force" ? SpindleConfig::Wait::kForce
                                         : SpindleConfig::Wait::kNever;
   cfg.sim_tau_s = s.number("sim_tau_s", 0.2, 0.001, 60.0);
+  cfg.override_min_percent = s.number("override_min_percent", 50.0, 0.0, 100.0);
+  cfg.override_max_percent = s.number("override_max_percent", 100.0, 100.0, 1000.0);
 
   if (cfg.type != "modbus_vfd") {
     if (s.has("vfd")) s.error("vfd", "only for type: modbus_vfd");

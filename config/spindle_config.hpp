@@ -13,6 +13,8 @@
 //   at_speed_tolerance_pct: 2
 //   at_speed_timeout_s: 10    # a feed move waits at most this long for at-speed, then FAULT
 //   at_speed_wait: always     # always | force (only with force control on) | never
+//   override_min_percent: 50  # spindle override range (`override --spindle`; 100 % must be in it)
+//   override_max_percent: 100
 //   vfd:                      # modbus_vfd
 //     transport: rtu          # rtu | tcp
 //     device: /dev/ttyUSB1
@@ -45,6 +47,10 @@ struct SpindleConfig {
   enum class Wait { kAlways, kForce, kNever };
   Wait at_speed_wait = Wait::kAlways;
   double sim_tau_s = 0.2;
+  // Spindle override range, percent of the programmed speed (LinuxCNC's MIN/MAX_SPINDLE_OVERRIDE
+  // defaults); the overridden speed is still clamped to min_rpm..max_rpm.
+  double override_min_percent = 50.0;
+  double override_max_percent = 100.0;
   drivers::modbus::VfdSettings vfd{};  // modbus_vfd; vfd.limits == limits
 };
 

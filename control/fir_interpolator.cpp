@@ -75,6 +75,9 @@ void Interpolator::configure(const InterpolatorParams& p, const Eigen::Vector3d&
   // Start at 100 %: the plan itself starts from rest, a ramp here would only stretch time.
   ovr_ = std::min(1.0, p.override_max);
   holding_ = resumed_hold_ = done_ = false;
+  rapid_now_ = false;
+  next_start_ = brake_for_ = -1;
+  next_rapid_ = false;
   last_ = InterpOutput{};
   last_.position_mm = start_mm;
 }
@@ -161,12 +164,25 @@ void Interpolator::set_hold_marker(const PlannedSegment* m) noexcept {
   last_.user_q = m != nullptr ? m->user_q : -1.0;
 }
 
-InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexcept {
+InterpStatus Interpolator::step(double feed_ratio, double rapid_ratio, InterpOutput& out) noexcept {
   if (done_) {
     out = last_;
     return out.status;
   }
-  double target = std::isnan(override_ratio) ? 0.0 : std::clamp(override_ratio, 0.0, p_.override_max);
+  auto clean = [this](double r) { return std::isnan(r) ? 0.0 : std::clamp(r, 0.0, p_.override_max); };
+  double target = clean(rapid_now_ ? rapid_ratio : feed_ratio);
+  if (next_start_ >= 0 && next_rapid_ != rapid_now_) {
+    // The next segment runs at a lower ratio: start braking when the plan time left before it
+    // starts is what a ramp from the present ratio down to its ratio consumes (plus a cycle).
+    const double r_next = clean(next_rapid_ ? rapid_ratio : feed_ratio);
+    const double r_rate = 1.0 / std::max(1, fir_.length() - 1);
+    const double need = (ovr_ * ovr_ - r_next * r_next) / (2.0 * r_rate) + ovr_;
+    if (r_next < target &&
+        (brake_for_ == next_start_ || static_cast<double>(next_start_) - tau_ <= need)) {
+      brake_for_ = next_start_;
+      target = r_next;
+    }
+  }
   if (holding_) {
     if (!resumed_hold_) {
       ovr_ = 0.0;
@@ -262,16 +278,32 @@ InterpStatus Interpolator::step(double override_ratio, InterpOutput& out) noexce
     done_ = true;
     q = base_mm_;  // exact final point: end_mm of the last finished block
   }
-  // Modal state of the newest block in motion.
+  // Modal state of the newest block in motion; the segment the path is on (that one, else the
+  // next to start) says which override applies next cycle.
+  const PlannedSegment* on = nullptr;
+  const PlannedSegment* next_seg = nullptr;
   for (std::size_t i = 0; i < count_; ++i) {
     const PlannedSegment& s = at(i);
-    if (s.kind != SegmentKind::kMotion || s.start_cycle > t0) break;
+    if (s.kind != SegmentKind::kMotion) break;
+    if (s.start_cycle > t0) {
+      if (on == nullptr) {
+        on = &s;
+      } else {
+        next_seg = &s;
+      }
+      break;
+    }
+    on = &s;
     last_.spindle = s.spindle;
     last_.spindle_rpm = s.spindle_rpm;
     last_.mist = s.mist;
     last_.flood = s.flood;
     last_.tool = s.tool;
   }
+  if (on != nullptr) rapid_now_ = on->rapid;
+  next_start_ = next_seg != nullptr ? next_seg->start_cycle : -1;
+  next_rapid_ = next_seg != nullptr && next_seg->rapid;
+  last_.rapid = rapid_now_;
   last_.position_mm = q;
   last_.path_progress_mm = prog0;
   last_.line = ln;

@@ -118,6 +118,8 @@ struct InterpOutput {
   double user_p = -1.0;
   double user_q = -1.0;
   InterpStatus status = InterpStatus::kIdle;
+  // The segment the path is on is a rapid (G0): the rapid override applies, not the feed override.
+  bool rapid = false;
 };
 
 struct InterpolatorParams {
@@ -148,7 +150,14 @@ class Interpolator {
 
   // One interpolation period. override in [0, override_max] (clamped; NaN -> 0). noexcept, no
   // allocation, O(L). Time budget: < 5 us on the target for L = 101 (bench_planner.cpp).
-  InterpStatus step(double override_ratio, InterpOutput& out) noexcept;
+  InterpStatus step(double override_ratio, InterpOutput& out) noexcept {
+    return step(override_ratio, override_ratio, out);
+  }
+  // The same with LinuxCNC's split: feed moves follow feed_ratio, rapids (PlannedSegment::rapid)
+  // rapid_ratio. Which one applies is decided by the segment the path is on (the newest one
+  // started, else the next to start); a change between them is rate-limited like any override
+  // change, so the time scale never steps.
+  InterpStatus step(double feed_ratio, double rapid_ratio, InterpOutput& out) noexcept;
   void resume() noexcept;
 
   // Reference point at an integer plan time using the queued segments (RT-safe, no state change).
@@ -184,6 +193,13 @@ class Interpolator {
   void set_hold_marker(const PlannedSegment* m) noexcept;
   bool resumed_hold_ = false;
   bool done_ = false;
+  bool rapid_now_ = false;  // the segment the path is on is a rapid
+  // The next motion segment to start, when of the other kind (-1: none): a lower override for it
+  // brakes the path in time to stand at its start (LinuxCNC: a feed move at 0 % feed override
+  // after a rapid does not creep). brake_for_ latches the braking until that segment starts.
+  std::int64_t next_start_ = -1;
+  bool next_rapid_ = false;
+  std::int64_t brake_for_ = -1;
   InterpOutput last_{};
 };
 

@@ -130,10 +130,19 @@ std::vector<CommandSpec> build_table() {
        {typed("set", ArgType::kAny, false, "a non-empty object of gains", "gains to change (the handler checks names and ranges)"),
         typed("op", ArgType::kAny, false, "", "ignored (accepted for older clients)")},
        kAnyState, false, false, "any", "the active gains, their generation and the drive models measured by identify since start (identified)"});
-  add({CommandId::kOverride, "override", "feed override in percent",
-       {number("percent", true, 0.0, kInf, "0 .. interpolator.feed_override_max_percent",
-               Bound::kOverridePercent)},
-       kAnyState, false, false, "any", "{feed_override_percent}"});
+  add({CommandId::kOverride, "override",
+       "feed, rapid and spindle override in percent (LinuxCNC's: the feed override scales feed "
+       "moves, the rapid override G0 moves, the spindle override the programmed S); at least one",
+       {number("percent", false, 0.0, kInf, "feed override: 0 .. interpolator.feed_override_max_percent",
+               Bound::kOverridePercent),
+        number("rapid_percent", false, 0.0, kInf,
+               "rapid override: 0 .. interpolator.rapid_override_max_percent",
+               Bound::kRapidOverridePercent),
+        number("spindle_percent", false, 0.0, kInf,
+               "spindle override: spindle.override_min_percent .. override_max_percent",
+               Bound::kSpindleOverridePercent)},
+       kAnyState, false, false, "any",
+       "{feed_override_percent, rapid_override_percent, spindle_override_percent}: what applies from the next cycle"});
   add({CommandId::kRecord, "record", "telemetry CSV recording",
        {typed("action", ArgType::kChoice, true, "\"start\" or \"stop\"", "start or stop", "start|stop"),
         typed("path", ArgType::kString, false, "a string",
@@ -349,6 +358,10 @@ std::string protocol_markdown() {
         case Bound::kJogVelocity: range = "[0.001, safety.jog_max_velocity_mm_min]"; break;
         case Bound::kAxisPosition: range = "the axis' soft limits"; break;
         case Bound::kOverridePercent: range = "[0, interpolator.feed_override_max_percent]"; break;
+        case Bound::kRapidOverridePercent: range = "[0, interpolator.rapid_override_max_percent]"; break;
+        case Bound::kSpindleOverridePercent:
+          range = "[spindle.override_min_percent, spindle.override_max_percent]";
+          break;
         case Bound::kForceReference: range = "[0, force.limits.force_ceiling_N]"; break;
       }
       o << "| `" << a.name << "` | " << (a.expect.empty() ? std::string_view("any") : a.expect)

@@ -48,6 +48,8 @@ enum class Bound : std::uint8_t {
   kJogVelocity,      // [1e-3, safety.jog_max_velocity_mm_min]
   kAxisPosition,     // the soft limits of the request's axis
   kOverridePercent,  // [0, interpolator.feed_override_max_percent]
+  kRapidOverridePercent,    // [0, interpolator.rapid_override_max_percent]
+  kSpindleOverridePercent,  // [spindle.override_min_percent, spindle.override_max_percent]
   kForceReference,   // [0, force.limits.force_ceiling_N]
 };
 

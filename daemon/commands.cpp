@@ -128,6 +128,9 @@ json Daemon::status_json() {
          {"line", st.line},
          {"override", st.override_applied},
          {"feed_override", st.feed_override},
+         {"rapid_override", st.rapid_override},
+         {"spindle_override", st.spindle_override},
+         {"on_rapid", st.on_rapid},
          {"job", st.attached_job},
          {"loaded_job", loaded_job_},
          {"finished_job", st.finished_job},
@@ -785,6 +788,11 @@ std::pair<double, double> Daemon::bound(Bound b, const json& req) const {
       return {l.min_mm[a], l.max_mm[a]};
     }
     case Bound::kOverridePercent: return {0.0, loop_->active_limits().feed_override_max * 100.0};
+    case Bound::kRapidOverridePercent: return {0.0, loop_->active_limits().rapid_override_max * 100.0};
+    case Bound::kSpindleOverridePercent: {
+      const LiveLimits l = loop_->active_limits();
+      return {l.spindle_override_min * 100.0, l.spindle_override_max * 100.0};
+    }
     case Bound::kForceReference:
       // Keep below the force ceiling: a reference at or above it would hold the feed at once.
       return {0.0, cfg_.force.limits.force_ceiling_N};
@@ -899,9 +907,25 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kHome: return cmd_home(req);
     case CommandId::kGains: return cmd_gains(req);
     case CommandId::kOverride: {
-      const double pct = req.at("percent").get<double>();
-      loop_->post({CommandKind::kSetOverride, 0, pct / 100.0, 0.0});
-      return {{"feed_override_percent", pct}};
+      if (!req.contains("percent") && !req.contains("rapid_percent") && !req.contains("spindle_percent")) {
+        throw CommandError("override: give 'percent' (feed), 'rapid_percent' or 'spindle_percent'");
+      }
+      // In range (checked from the table against the live limits): the loop applies exactly
+      // these at its next cycle; the others stay as they are.
+      const LoopStatus st = loop_->status();
+      double feed = st.feed_override * 100.0, rapid = st.rapid_override * 100.0,
+             spindle = st.spindle_override * 100.0;
+      auto set = [&](const char* key, int which, double& pct) {
+        if (!req.contains(key)) return;
+        pct = req.at(key).get<double>();
+        loop_->post({CommandKind::kSetOverride, which, pct / 100.0, 0.0});
+      };
+      set("percent", kOverrideFeed, feed);
+      set("rapid_percent", kOverrideRapid, rapid);
+      set("spindle_percent", kOverrideSpindle, spindle);
+      return {{"feed_override_percent", feed},
+              {"rapid_override_percent", rapid},
+              {"spindle_override_percent", spindle}};
     }
     case CommandId::kRecord: return cmd_record(req);
     case CommandId::kSubscribe:

@@ -61,6 +61,9 @@ ReloadClass classify_key(const std::string& key) {
       "machine.axes[].max_velocity_mm_min",
       "machine.axes[].max_accel_mm_s2",
       "interpolator.feed_override_max_percent",
+      "interpolator.rapid_override_max_percent",
+      "spindle.override_min_percent",
+      "spindle.override_max_percent",
   };
   if (limits.count(k) != 0) return ReloadClass::kLimits;
   auto under = [&](const char* section) {

@@ -435,6 +435,9 @@ void Daemon::reload_config() {
     c.safety.standstill_timeout_s = n.safety.standstill_timeout_s;
     c.safety.jog_max_velocity_mm_min = n.safety.jog_max_velocity_mm_min;
     c.interpolator.feed_override_max_percent = n.interpolator.feed_override_max_percent;
+    c.interpolator.rapid_override_max_percent = n.interpolator.rapid_override_max_percent;
+    c.spindle.override_min_percent = n.spindle.override_min_percent;
+    c.spindle.override_max_percent = n.spindle.override_max_percent;
     const auto st = loop_->status();
     for (std::size_t i = 0; i < c.machine.axes.size(); ++i) {
       auto& a = c.machine.axes[i];
@@ -463,6 +466,9 @@ void Daemon::reload_config() {
       }
       cfg_.safety = c.safety;
       cfg_.interpolator.feed_override_max_percent = c.interpolator.feed_override_max_percent;
+      cfg_.interpolator.rapid_override_max_percent = c.interpolator.rapid_override_max_percent;
+      cfg_.spindle.override_min_percent = c.spindle.override_min_percent;
+      cfg_.spindle.override_max_percent = c.spindle.override_max_percent;
       cfg_.machine = c.machine;
       planner_->set_live(cfg_);
     } catch (const std::exception& e) {

@@ -59,8 +59,8 @@ void ProgramSource::drain() noexcept {
 
 double ProgramSource::programmed_spindle_rpm() const noexcept {
   switch (iout_.spindle) {
-    case control::SpindleDir::kCw: return iout_.spindle_rpm;
-    case control::SpindleDir::kCcw: return -iout_.spindle_rpm;
+    case control::SpindleDir::kCw: return iout_.spindle_rpm * spindle_override_;
+    case control::SpindleDir::kCcw: return -iout_.spindle_rpm * spindle_override_;
     case control::SpindleDir::kOff: break;
   }
   return 0.0;
@@ -70,8 +70,10 @@ RefPoint ProgramSource::step(const Inputs& in, ProgramStep& out) noexcept {
   using control::InterpStatus;
   out = ProgramStep{};
   // HOLD and stop decelerate along the path: the interpolator ramps its override to 0.
-  const double ovr = (in.running && !stopping_) ? in.override_ratio : 0.0;
-  const InterpStatus ist = job_->interp.step(ovr, iout_);
+  const bool moving = in.running && !stopping_;
+  spindle_override_ = std::isfinite(in.spindle_override) ? std::max(0.0, in.spindle_override) : 1.0;
+  const InterpStatus ist = job_->interp.step(moving ? in.override_ratio : 0.0,
+                                             moving ? in.rapid_override_ratio : 0.0, iout_);
   out.status = ist;
   RefPoint r;
   r.source = SourceKind::kProgram;

@@ -46,6 +46,8 @@ class ProgramSource {
   struct Inputs {
     bool running = false;           // state RUNNING (else HOLD)
     double override_ratio = 0.0;    // user x force override (0 while HOLD / stopping is applied here)
+    double rapid_override_ratio = 1.0;  // rapids (G0): the rapid override alone
+    double spindle_override = 1.0;      // scales the programmed spindle speed (S)
     bool wait_for_spindle = false;  // a spindle is present and at_speed_wait asks for the wait
     bool spindle_at_speed = false;  // the spindle channel's judgement (previous cycle)
     double spindle_target_rpm = 0.0;  // the spindle channel's clamped target (previous cycle)
@@ -83,7 +85,8 @@ class ProgramSource {
 
   [[nodiscard]] const control::InterpOutput& output() const noexcept { return iout_; }
   void reset_output() noexcept { iout_ = control::InterpOutput{}; }
-  // Signed speed of the program's modal spindle state (M3 +, M4 -, M5 0), before the limits.
+  // Signed speed of the program's modal spindle state (M3 +, M4 -, M5 0) times the spindle
+  // override, before the limits.
   [[nodiscard]] double programmed_spindle_rpm() const noexcept;
   [[nodiscard]] bool spindle_waiting() const noexcept { return spindle_waiting_; }
   [[nodiscard]] std::int64_t waited_cycles() const noexcept { return spindle_wait_cycles_; }
@@ -104,6 +107,7 @@ class ProgramSource {
   control::InterpOutput iout_{};
   control::PlannedSegment seg_{};
   SegmentRecord rec_{};  // drain()'s scratch (a local was zeroed every cycle: ~5 % of the cycle)
+  double spindle_override_ = 1.0;  // of the last step(): programmed_spindle_rpm() includes it
   bool stopping_ = false;
   bool underrun_ = false;
   bool settling_ = false;

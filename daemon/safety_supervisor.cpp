@@ -17,6 +17,9 @@ LiveLimits live_limits_from(const config::Config& cfg) {
   l.standstill_time_s = cfg.safety.standstill_time_s;
   l.standstill_timeout_s = cfg.safety.standstill_timeout_s;
   l.feed_override_max = cfg.interpolator.feed_override_max_percent / 100.0;
+  l.rapid_override_max = cfg.interpolator.rapid_override_max_percent / 100.0;
+  l.spindle_override_min = cfg.spindle.override_min_percent / 100.0;
+  l.spindle_override_max = cfg.spindle.override_max_percent / 100.0;
   l.jog_max_velocity_mm_s = cfg.safety.jog_max_velocity_mm_min / 60.0;
   for (std::size_t i = 0; i < 3; ++i) {
     if (i < cfg.machine.axes.size()) {
@@ -45,6 +48,15 @@ void validate(const LiveLimits& l, int axes) {
   positive(l.standstill_velocity_mm_s, "safety.standstill_velocity_mm_s");
   positive(l.standstill_timeout_s, "safety.standstill_timeout_s");
   positive(l.feed_override_max, "interpolator.feed_override_max_percent");
+  positive(l.rapid_override_max, "interpolator.rapid_override_max_percent");
+  if (!(l.rapid_override_max <= 1.0)) {
+    throw std::invalid_argument("limits: interpolator.rapid_override_max_percent must be <= 100");
+  }
+  if (!(l.spindle_override_min >= 0.0 && l.spindle_override_min <= 1.0 &&
+        l.spindle_override_max >= 1.0 && std::isfinite(l.spindle_override_max))) {
+    throw std::invalid_argument(
+        "limits: spindle.override_min_percent must be 0..100 and override_max_percent >= 100");
+  }
   positive(l.jog_max_velocity_mm_s, "safety.jog_max_velocity_mm_min");
   if (!std::isfinite(l.standstill_time_s) || l.standstill_time_s < 0.0 ||
       l.standstill_time_s >= l.standstill_timeout_s) {

@@ -36,6 +36,9 @@ struct LiveLimits {
   double standstill_time_s = 0.05;
   double standstill_timeout_s = 2.0;
   double feed_override_max = 1.5;          // ratio (interpolator.feed_override_max_percent / 100)
+  double rapid_override_max = 1.0;         // ratio (interpolator.rapid_override_max_percent / 100)
+  double spindle_override_min = 0.5;       // ratios (spindle.override_min/max_percent / 100)
+  double spindle_override_max = 1.0;
   double jog_max_velocity_mm_s = 50.0;     // safety.jog_max_velocity_mm_min / 60
   bool operator==(const LiveLimits&) const = default;
 };

@@ -485,9 +485,17 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
         jog_.brake(ref_[jog_.axis()], limits_.max_accel_mm_s2[static_cast<std::size_t>(jog_.axis())]);
       }
       break;
-    case CommandKind::kSetOverride:
-      feed_override_ = std::clamp(std::isfinite(c.a) ? c.a : 0.0, 0.0, limits_.feed_override_max);
+    case CommandKind::kSetOverride: {
+      const double v = std::isfinite(c.a) ? c.a : 0.0;
+      if (c.axis == kOverrideRapid) {
+        rapid_override_ = std::clamp(v, 0.0, limits_.rapid_override_max);
+      } else if (c.axis == kOverrideSpindle) {
+        spindle_override_ = std::clamp(v, limits_.spindle_override_min, limits_.spindle_override_max);
+      } else {
+        feed_override_ = std::clamp(v, 0.0, limits_.feed_override_max);
+      }
       break;
+    }
     case CommandKind::kRecordFlag:
       recording_ = c.a != 0.0;
       break;
@@ -694,6 +702,11 @@ void ServoLoop::take_staged() noexcept {
   if (staged_limits_ready_.load(std::memory_order_acquire)) {
     limits_ = staged_limits_;
     limits_eff_dirty_ = true;
+    // Overrides stay inside the new ranges (status shows what applies).
+    feed_override_ = std::min(feed_override_, limits_.feed_override_max);
+    rapid_override_ = std::min(rapid_override_, limits_.rapid_override_max);
+    spindle_override_ =
+        std::clamp(spindle_override_, limits_.spindle_override_min, limits_.spindle_override_max);
     limits_generation_ = staged_limits_generation_.load(std::memory_order_relaxed);
     staged_limits_ready_.store(false, std::memory_order_release);
     emit(EventKind::kLimitsSwapped, FaultCause::kNone, -1, static_cast<double>(limits_generation_));
@@ -804,6 +817,8 @@ void ServoLoop::program_step(MachineState st, RefPoint& r) noexcept {
   in.running = st == MachineState::kRunning;
   // The force controller's override (channels stage of the previous cycle) scales the user's.
   in.override_ratio = feed_override_ * force_.feed_override();
+  in.rapid_override_ratio = rapid_override_;  // no cutting on a rapid: neither feed nor force
+  in.spindle_override = spindle_override_;
   using Wait = config::SpindleConfig::Wait;
   const Wait policy = cfg_.spindle.at_speed_wait;
   in.wait_for_spindle = spindle_.present() && (policy == Wait::kAlways ||
@@ -1157,6 +1172,9 @@ void ServoLoop::publish() noexcept {
   pub_.line = io.line;
   pub_.override_applied = io.override_applied;
   pub_.feed_override = feed_override_;
+  pub_.rapid_override = rapid_override_;
+  pub_.spindle_override = spindle_override_;
+  pub_.on_rapid = io.rapid;
   pub_.attached_job = program_.attached() ? program_.job()->id : 0;
   pub_.finished_job = finished_job_;
   pub_.finished_ok = finished_ok_;

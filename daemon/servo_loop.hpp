@@ -59,9 +59,12 @@
 
 namespace contour::daemon {
 
+inline constexpr int kOverrideFeed = 0, kOverrideRapid = 1, kOverrideSpindle = 2;
+
 enum class CommandKind : std::uint8_t {
   kEnable, kDisable, kRun, kHold, kResume, kStop, kEstop, kReset, kJog, kAttachJob,
-  kSetOverride, kRecordFlag,
+  kSetOverride,  // axis: 0 feed, 1 rapid, 2 spindle (kOverrideFeed..); a = ratio, clamped to its limits
+  kRecordFlag,
   kSetPosition,  // axis, a = position mm; DISABLED/READY only (bus.set_position on the RT thread)
   kForce,        // axis: 1 = on, 0 = off, -1 = unchanged; a = reference N (NaN = unchanged)
   kIdentify,     // axis: play the identification excitation on it (READY, nothing loaded/jogging)
@@ -169,6 +172,9 @@ struct LoopStatus {
   int line = 0;
   double override_applied = 0.0;
   double feed_override = 1.0;
+  double rapid_override = 1.0;    // ratio, for rapids (G0); the feed override does not apply to them
+  double spindle_override = 1.0;  // ratio of the programmed spindle speed
+  bool on_rapid = false;          // the path is on a rapid: override_applied follows rapid_override
   std::uint64_t attached_job = 0;   // program the loop is executing (0 = none)
   std::uint64_t finished_job = 0;   // last program that ended (done, stopped or aborted)
   bool finished_ok = false;         // finished_job ran to its end
@@ -446,6 +452,8 @@ class ServoLoop {
   bool last_servo_ = false;                            // the last cycle servoed the axes
   ResetBlock reset_block_{};                           // why the last reset attempt was refused
   double feed_override_ = 1.0;
+  double rapid_override_ = 1.0;
+  double spindle_override_ = 1.0;
   bool recording_ = false;
   int fault_axis_ = -1;
   double fault_value_ = 0.0, fault_limit_ = 0.0;

@@ -461,9 +461,25 @@ TEST_F(ContourctlTest, ShortConfirmationInsteadOfStatus) {
   };
   ASSERT_EQ(wait_state("READY").value("state", ""), "READY");
 
-  EXPECT_EQ(line(ctl({"override", "25"})), "override: feed 25 %");
+  EXPECT_EQ(line(ctl({"override", "25"})), "override: feed 25 %, rapid 100 %, spindle 100 %");
   const json o = last_json(ctl({"--json", "override", "25"}));
   EXPECT_DOUBLE_EQ(o.value("feed_override_percent", 0.0), 25.0) << o.dump();
+  // Rapid and spindle override (config/sim.yaml: rapid up to 100 %, spindle 50..150 %); the
+  // feed override stays as it was; out of range is refused naming the argument and its range.
+  EXPECT_EQ(line(ctl({"override", "--rapid", "40", "--spindle", "120"})),
+            "override: feed 25 %, rapid 40 %, spindle 120 %");
+  const Proc bad = ctl({"override", "--spindle", "160"});
+  EXPECT_NE(bad.rc, 0);
+  EXPECT_NE((bad.out + bad.err).find("spindle_percent"), std::string::npos) << bad.out << bad.err;
+  const Proc none = ctl({"override"});
+  EXPECT_EQ(none.rc, 2) << none.out << none.err;
+  {
+    const json st = last_json(ctl({"--json", "status"}));
+    EXPECT_DOUBLE_EQ(st.value("rapid_override", 0.0), 0.4) << st.dump();
+    EXPECT_DOUBLE_EQ(st.value("spindle_override", 0.0), 1.2) << st.dump();
+    EXPECT_DOUBLE_EQ(st.value("feed_override", 0.0), 0.25) << st.dump();
+  }
+  ASSERT_EQ(ctl({"override", "--rapid", "100", "--spindle", "100"}).rc, 0);
 
   // hold / resume / stop on a running program (at 25 % feed so that it is still running).
   ASSERT_EQ(ctl({"run", kProgram}).rc, 0);
@@ -481,7 +497,7 @@ TEST_F(ContourctlTest, ShortConfirmationInsteadOfStatus) {
       << "not the whole status: " << rj.dump();
   const std::string stop = line(ctl({"stop"}));
   EXPECT_EQ(stop.rfind("stop: state ", 0), 0u) << stop;
-  EXPECT_EQ(line(ctl({"override", "100"})), "override: feed 100 %");
+  EXPECT_EQ(line(ctl({"override", "100"})), "override: feed 100 %, rapid 100 %, spindle 100 %");
 
   // jog and set-position: the axis and where it goes.
   json st = wait_state("READY");

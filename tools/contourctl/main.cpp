@@ -22,6 +22,7 @@
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -186,7 +187,9 @@ std::string confirmation(const std::string& cmd, const json& r) {
     return b;
   }
   if (cmd == "override" && r.contains("feed_override_percent")) {
-    std::snprintf(b, sizeof b, "override: feed %g %%", r["feed_override_percent"].get<double>());
+    std::snprintf(b, sizeof b, "override: feed %g %%, rapid %g %%, spindle %g %%",
+                  r["feed_override_percent"].get<double>(), r.value("rapid_override_percent", 100.0),
+                  r.value("spindle_override_percent", 100.0));
     return b;
   }
   if (cmd == "force" && r.contains("enabled")) {
@@ -458,10 +461,13 @@ std::string watch_line(const json& st) {
     }
   }
   const json tm = st.value("timing", json::object());
-  std::snprintf(b, sizeof b, "  late p99 %5.0f us  ovr %llu  feed %3.0f%%  line %d",
+  // "overruns" (missed deadlines) spelled out: "ovr" read as override.
+  std::snprintf(b, sizeof b,
+                "  late p99 %5.0f us  overruns %llu  feed %3.0f%%  rapid %3.0f%%  spindle %3.0f%%  line %d",
                 tm.value("lateness_p99_us", 0.0),
                 static_cast<unsigned long long>(tm.value("overruns", 0ULL)),
-                100.0 * st.value("override", 1.0), st.value("line", 0));
+                100.0 * st.value("feed_override", 1.0), 100.0 * st.value("rapid_override", 1.0),
+                100.0 * st.value("spindle_override", 1.0), st.value("line", 0));
   o << b;
   return o.str();
 }
@@ -557,7 +563,8 @@ int main(int argc, char** argv) {
   RunOptions ro;
   std::string program;
   std::string axis;
-  double vel = 0.0, dist = 0.0, pos = 0.0, pct = 100.0;
+  double vel = 0.0, dist = 0.0, pos = 0.0;
+  std::optional<double> pct_feed, pct_rapid, pct_spindle;
   std::string jog_dir;
   std::string home_axis;
   bool home_all = false;
@@ -612,8 +619,12 @@ int main(int argc, char** argv) {
   gains->add_flag("--no-identified", gains_no_identified,
                   "gains save: leave the drive models (machine.axes[].sim) as they are, even for "
                   "axes measured by identify");
-  auto* ovr = app.add_subcommand("override", summary("override", "feed override in percent"));
-  ovr->add_option("PERCENT", pct)->required();
+  auto* ovr = app.add_subcommand(
+      "override", summary("override", "feed, rapid and spindle override in percent") +
+                      " (override [FEED%] [--rapid %] [--spindle %])");
+  ovr->add_option("PERCENT", pct_feed, "feed override");
+  ovr->add_option("--rapid", pct_rapid, "rapid override (G0), up to interpolator.rapid_override_max_percent");
+  ovr->add_option("--spindle", pct_spindle, "spindle override, spindle.override_min/max_percent");
   auto* rec =
       app.add_subcommand("record",
                          "record start [NAME] | record stop [--plot F.png --kind K]: the daemon "
@@ -816,7 +827,13 @@ int main(int argc, char** argv) {
       req["axis"] = axis;
       req["position_mm"] = pos;
     } else if (cmd == "override") {
-      req["percent"] = pct;
+      if (!pct_feed && !pct_rapid && !pct_spindle) {
+        std::cerr << "contourctl override: give FEED%, --rapid % or --spindle %\n";
+        return 2;
+      }
+      if (pct_feed) req["percent"] = *pct_feed;
+      if (pct_rapid) req["rapid_percent"] = *pct_rapid;
+      if (pct_spindle) req["spindle_percent"] = *pct_spindle;
     } else if (cmd == "force") {
       // force on [N] | force off | force ref N | force status (query): the daemon's `force`
       // command takes action "on"/"off" and/or reference_N.

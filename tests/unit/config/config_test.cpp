@@ -58,3 +58,26 @@ TEST(Config, AFileWithoutAMachineSectionIsAnError) {
                                            std::string(contour::test::kMachineYaml))
                   .empty());
 }
+
+// Issue 18: rapid and spindle override limits (LinuxCNC: rapids at most 100 %; the spindle
+// override range must contain 100 %).
+TEST(Config, OverrideLimitsAreRangeChecked) {
+  const std::string m = "machine:\n  axes:\n    - {name: X}\n";
+  auto cfg = load_config_string(m + "interpolator: {rapid_override_max_percent: 80}\n"
+                                    "spindle: {type: sim, override_min_percent: 20, override_max_percent: 200}\n");
+  EXPECT_EQ(cfg.interpolator.rapid_override_max_percent, 80.0);
+  EXPECT_EQ(cfg.spindle.override_min_percent, 20.0);
+  EXPECT_EQ(cfg.spindle.override_max_percent, 200.0);
+  const auto d = load_config_string(m);
+  EXPECT_EQ(d.interpolator.rapid_override_max_percent, 100.0);
+  EXPECT_EQ(d.spindle.override_min_percent, 50.0);
+  EXPECT_EQ(d.spindle.override_max_percent, 100.0);
+  auto errs = errors_of(m + "interpolator: {rapid_override_max_percent: 150}\n");
+  EXPECT_TRUE(any_contains(errs, "interpolator.rapid_override_max_percent: value 150 out of range"))
+      << ::testing::PrintToString(errs);
+  errs = errors_of(m + "spindle: {type: sim, override_min_percent: 120, override_max_percent: 90}\n");
+  EXPECT_TRUE(any_contains(errs, "spindle.override_min_percent: value 120 out of range"))
+      << ::testing::PrintToString(errs);
+  EXPECT_TRUE(any_contains(errs, "spindle.override_max_percent: value 90 out of range"))
+      << ::testing::PrintToString(errs);
+}

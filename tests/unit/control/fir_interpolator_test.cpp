@@ -213,3 +213,76 @@ TEST(Interpolator, FeedMoveAfterASpindleChangeWaitsAtAnExactStopWithTheNewSpeedO
   EXPECT_EQ(wait_x[1], 15.0);
   EXPECT_EQ(wait_rpm[1], 8000.0);
 }
+
+namespace {
+// G1 X10 / G0 Y50 / G1 X0 as planned segments (exact stops between them: G61).
+std::vector<PlannedSegment> plan_feed_rapid_feed(bool rapid_first = false) {
+  PlannerParams pp;
+  BlendPlanner pl(pp, Vector3d::Zero());
+  std::vector<Vector3d> pts = {{0, 0, 0}, {10, 0, 0}, {10, 50, 0}, {0, 50, 0}};
+  std::vector<bool> rapid = {false, true, false};
+  if (rapid_first) rapid = {true, false, false};
+  for (int i = 1; i < 4; ++i) {
+    Block b;
+    b.line = i;
+    b.rapid = rapid[static_cast<std::size_t>(i - 1)];
+    b.feed_mm_min = b.rapid ? 6000 : 1500;
+    b.blend = BlendMode::kExactStop;
+    b.seg = PathSegment::line(pts[static_cast<std::size_t>(i - 1)], pts[static_cast<std::size_t>(i)]);
+    pl.push(b);
+  }
+  Block e;
+  e.kind = BlockKind::kEnd;
+  pl.push(e);
+  std::vector<PlannedSegment> out;
+  PlannedSegment s;
+  while (pl.pop(s)) out.push_back(s);
+  return out;
+}
+}  // namespace
+
+// LinuxCNC's split: the feed override scales feed moves, the rapid override rapids (G0); a change
+// between them is rate-limited like any override change.
+TEST(Interpolator, RapidOverrideAppliesToRapidsAndFeedOverrideToFeedMoves) {
+  Interpolator ip;
+  InterpolatorParams p;
+  ip.configure(p, Vector3d::Zero());
+  for (const auto& s : plan_feed_rapid_feed()) ASSERT_TRUE(ip.push(s));
+  InterpOutput out;
+  double max_on_rapid = 0.0, max_on_feed = 0.0, prev = -1.0, max_step = 0.0;
+  int rapid_cycles = 0, n = 0;
+  while (ip.step(0.5, 1.0, out) != InterpStatus::kDone && n < 200000) {
+    ++n;
+    if (out.rapid) {
+      ++rapid_cycles;
+      max_on_rapid = std::max(max_on_rapid, out.override_applied);
+    } else if (n > p.fir_taps) {  // (the interpolator starts at 100 % and ramps to the first ratio)
+      max_on_feed = std::max(max_on_feed, out.override_applied);
+    }
+    if (prev >= 0.0) max_step = std::max(max_step, std::abs(out.override_applied - prev));
+    prev = out.override_applied;
+  }
+  ASSERT_EQ(out.status, InterpStatus::kDone);
+  EXPECT_GT(rapid_cycles, 200);
+  EXPECT_NEAR(max_on_rapid, 1.0, 1e-12);  // the rapid at 100 %, though the feed override is 50 %
+  EXPECT_LE(max_on_feed, 0.5 + 1.0 / (p.fir_taps - 1) + 1e-12);  // feed moves at 50 % (+ one ramp step)
+  EXPECT_LE(max_step, 1.0 / (p.fir_taps - 1) + 1e-12);  // never a step in the time scale
+  EXPECT_TRUE((out.position_mm - Vector3d(0, 50, 0)).norm() < 1e-9) << out.position_mm.transpose();
+}
+
+// Feed override 0 % does not stop a rapid (LinuxCNC): the program's first move, a rapid, runs to
+// its end; the feed move after it does not start (no creep while the time scale ramps down).
+TEST(Interpolator, FeedOverrideZeroLetsTheRapidRunAndHoldsTheFeedMove) {
+  Interpolator ip;
+  ip.configure(InterpolatorParams{}, Vector3d::Zero());
+  for (const auto& s : plan_feed_rapid_feed(true)) ASSERT_TRUE(ip.push(s));
+  InterpOutput out;
+  for (int k = 0; k < 20000; ++k) ip.step(0.0, 1.0, out);
+  const Vector3d stands = out.position_mm;
+  for (int k = 0; k < 500; ++k) ip.step(0.0, 1.0, out);
+  EXPECT_EQ(out.status, InterpStatus::kRunning);
+  EXPECT_EQ(out.override_applied, 0.0);
+  EXPECT_EQ(out.position_mm, stands);
+  // At the rapid's end (10, 0, 0): the path braked in time to stand at the feed move's start.
+  EXPECT_LT((out.position_mm - Vector3d(10, 0, 0)).norm(), 0.01) << out.position_mm.transpose();
+}

@@ -216,6 +216,46 @@ TEST(SpindleLoop, SpeedIsClampedToTheLimitsAndRateLimited) {
   EXPECT_EQ(r.loop.status().spindle_waits, 3u);
 }
 
+// Spindle override (`override spindle_percent`): scales the programmed S, within the configured
+// range (config/sim.yaml: 50..150 %); the at-speed wait is judged on the overridden speed; a
+// change mid-program retargets the spindle at its rate limit.
+TEST(SpindleLoop, SpindleOverrideScalesTheProgrammedSpeedAndTheWaitUsesIt) {
+  auto cfg = spindle_config(6000.0);
+  ASSERT_EQ(cfg.spindle.override_max_percent, 150.0);
+  SpindleRig r(cfg);
+  ASSERT_TRUE(r.enable());
+  r.loop.post({CommandKind::kSetOverride, kOverrideSpindle, 3.0, 0.0});  // clamped to 150 %
+  r.step();
+  EXPECT_EQ(r.loop.status().spindle_override, 1.5);
+  r.loop.post({CommandKind::kSetOverride, kOverrideSpindle, 0.1, 0.0});  // clamped to 50 %
+  r.step();
+  EXPECT_EQ(r.loop.status().spindle_override, 0.5);
+  r.loop.post({CommandKind::kSetOverride, kOverrideSpindle, 1.2, 0.0});
+  const auto job1 = r.load("G21 G90\nM3 S4000\nG01 X5 F600\nM5\nM2\n", 1);
+  r.loop.post({CommandKind::kRun});
+  r.step(400);  // into the wait (the ramp to 4800 rpm takes 0.8 s)
+  EXPECT_TRUE(r.loop.status().spindle_waiting);
+  EXPECT_EQ(r.loop.status().spindle_target_rpm, 4800.0);  // 4000 x 120 %
+  const Trace t2 = run_until_done(r, 20000);
+  auto st = r.loop.status();
+  ASSERT_TRUE(st.finished_ok) << to_string(st.state) << " " << to_string(st.cause);
+  // The feed started at the overridden speed: within max(50, 2 % of 4800) = 96 rpm of 4800.
+  EXPECT_GE(t2.rpm_at_motion, 4800.0 - 96.0);
+  EXPECT_EQ(st.spindle_waits, 1u);
+  // Mid-program change: 60 % of S3000 while cutting.
+  const auto job2 = r.load("G21 G90\nM3 S3000\nG01 X0 F100\nM5\nM2\n", 2);
+  r.loop.post({CommandKind::kRun});
+  r.step(1500);
+  ASSERT_EQ(r.loop.status().attached_job, 2u);
+  ASSERT_EQ(r.loop.status().spindle_target_rpm, 3600.0);
+  r.loop.post({CommandKind::kSetOverride, kOverrideSpindle, 0.6, 0.0});
+  r.step();
+  r.step();
+  st = r.loop.status();
+  EXPECT_EQ(st.spindle_target_rpm, 1800.0);
+  EXPECT_EQ(st.spindle_override, 0.6);
+}
+
 TEST(SpindleLoop, VfdSpindleOverModbusGetsTheCommandAndGatesTheFeed) {
   // spindle.type modbus_vfd: the loop's rate-limited command goes to the VFD thread (IoChannels),
   // the VFD's actual-speed register gates the feed move; a stalled VFD faults at the timeout.
