@@ -58,11 +58,14 @@ std::vector<CommandSpec> build_table() {
                              "name of an inline program in messages");
   add({CommandId::kStatus, "status", "machine state, positions, errors, loop timing", {}, kAnyState,
        false, false, "any", "the status object"});
+  const ArgSpec preview = typed("preview", ArgType::kBool, false, "true or false",
+                                "also plan the whole program once and reply its extents, time, blocks, tools and path");
   add({CommandId::kLoad, "load",
        "validate (file:line:column errors, soft limits) and plan a part program",
-       {path, program, name}, bits({S::kReady}), false, false,
+       {path, program, name, preview}, bits({S::kReady}), false, false,
        "READY, not jogging; exactly one of path / program",
-       "{job, name, lines, motion_blocks, length_mm}"});
+       "{job, name, lines, motion_blocks, length_mm}; preview: also {blocks, tools, estimated_time_s, "
+       "extents: {machine|work: {X: [min, max], ...}}, path_mm: [[x, y, z], ...]}"});
   {
     ArgSpec off = typed("offset", ArgType::kJobNumber, true, "a byte offset (0 starts an upload)",
                         "bytes received so far: 0 starts, each chunk continues exactly");
@@ -71,7 +74,8 @@ std::vector<CommandSpec> build_table() {
          "chunk loads it like `load` (limit socket.max_program_bytes)",
          {typed("name", ArgType::kString, true, "a non-empty string", "the program's name"), off,
           typed("data", ArgType::kString, true, "a string", "the next chunk of the program text"),
-          typed("final", ArgType::kBool, false, "true or false", "last chunk: load the program")},
+          typed("final", ArgType::kBool, false, "true or false", "last chunk: load the program"),
+          preview},
          bits({S::kReady}), false, false, "READY for the final chunk (one upload at a time)",
          "{name, bytes, complete}; final: as `load` plus bytes"});
   }

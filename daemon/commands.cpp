@@ -416,10 +416,10 @@ json Daemon::cmd_load(const json& req) {
       src.name = req["name"].get<std::string>();
     }
   }
-  return load_source(src);
+  return load_source(src, req.value("preview", false));
 }
 
-json Daemon::load_source(const ProgramText& src) {
+json Daemon::load_source(const ProgramText& src, bool preview) {
   const auto st = loop_->status();
   if (st.state != MachineState::kReady) {
     throw CommandError(std::string("load is not allowed in state ") + std::string(to_string(st.state)) +
@@ -428,8 +428,10 @@ json Daemon::load_source(const ProgramText& src) {
   if (st.jogging) throw CommandError("load is not allowed while jogging");
   const Eigen::Vector3d start(st.ref_mm[0], st.ref_mm[1], st.ref_mm[2]);
   ProgramSummary sum;
+  double estimated_s = 0.0;
   try {
-    sum = planner_->validate(src, start);
+    sum = planner_->validate(src, start, preview);
+    if (preview) estimated_s = planner_->estimate_time_s(src, start);
   } catch (const ProgramError& e) {
     throw CommandError(std::string("load: ") + e.what());
   }
@@ -459,8 +461,29 @@ json Daemon::load_source(const ProgramText& src) {
   loaded_job_ = id;
   spdlog::info("loaded {} as job {} ({} lines, {} moves, {:.3f} mm)", src.name, id, sum.lines,
                sum.motion_blocks, sum.length_mm);
-  return {{"job", id}, {"name", src.name}, {"lines", sum.lines}, {"motion_blocks", sum.motion_blocks},
-          {"length_mm", sum.length_mm}};
+  json r{{"job", id}, {"name", src.name}, {"lines", sum.lines}, {"motion_blocks", sum.motion_blocks},
+         {"length_mm", sum.length_mm}};
+  if (preview) {
+    json machine = json::object(), work = json::object();
+    for (std::size_t i = 0; i < cfg_.machine.axes.size() && i < 3; ++i) {
+      const std::string& n = cfg_.machine.axes[i].name;
+      if (sum.has_motion) {
+        machine[n] = {sum.machine_min_mm[i], sum.machine_max_mm[i]};
+        work[n] = {sum.work_min_mm[i], sum.work_max_mm[i]};
+      } else {
+        machine[n] = nullptr;
+        work[n] = nullptr;
+      }
+    }
+    json path = json::array();
+    for (const auto& p : sum.path_mm) path.push_back({p[0], p[1], p[2]});
+    r["blocks"] = sum.blocks;
+    r["tools"] = sum.tools;
+    r["estimated_time_s"] = estimated_s;
+    r["extents"] = {{"machine", machine}, {"work", work}};
+    r["path_mm"] = std::move(path);
+  }
+  return r;
 }
 
 json Daemon::cmd_gains(const json& req) {

@@ -103,7 +103,8 @@ class Daemon {
   nlohmann::json result_json(std::uint64_t job);
   MachineState post_and_wait(const LoopCommand& c, MachineState from, double timeout_s);
   nlohmann::json cmd_load(const nlohmann::json& req);
-  nlohmann::json load_source(const ProgramText& src);  // cmd_load after its arguments
+  // cmd_load after its arguments; preview: also the whole-program figures (ProgramSummary).
+  nlohmann::json load_source(const ProgramText& src, bool preview = false);
   nlohmann::json cmd_upload(const nlohmann::json& req, const ClientInfo& client);  // commands_files.cpp
   void check_paths();  // socket directory, telemetry directory: StartupConfigError
   nlohmann::json cmd_gains(const nlohmann::json& req);

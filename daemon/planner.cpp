@@ -1,7 +1,10 @@
 #include "daemon/planner.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
+#include <limits>
+#include <set>
 #include <sstream>
 
 #include "config/interpolator_config.hpp"
@@ -87,8 +90,8 @@ control::InterpolatorParams ProgramPlanner::interpolator_params() const {
   return ip;
 }
 
-ProgramSummary ProgramPlanner::validate(const ProgramText& src,
-                                        const Eigen::Vector3d& start_mm) const {
+ProgramSummary ProgramPlanner::validate(const ProgramText& src, const Eigen::Vector3d& start_mm,
+                                        bool keep_path) const {
   const config::Config cfg = config_snapshot();
   control::ProgramSetup setup = config::to_program_setup(cfg.program, cfg.interpolator);
   setup.start_mm = start_mm;
@@ -96,15 +99,36 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src,
   std::vector<Eigen::Vector3d> pts;
   ProgramSummary sum;
   const double chord = cfg.interpolator.tolerance_um * 1e-3 * cfg.interpolator.arc_chord_fraction;
+  sum.machine_min_mm.fill(std::numeric_limits<double>::infinity());
+  sum.work_min_mm.fill(std::numeric_limits<double>::infinity());
+  sum.machine_max_mm.fill(-std::numeric_limits<double>::infinity());
+  sum.work_max_mm.fill(-std::numeric_limits<double>::infinity());
+  std::set<int> tools;
+  auto extend = [&](const control::Block& b, const Eigen::Vector3d& p) {
+    const Eigen::Vector3d w = control::work_coordinates(b, p);
+    for (std::size_t i = 0; i < 3; ++i) {
+      const auto k = static_cast<Eigen::Index>(i);
+      sum.machine_min_mm[i] = std::min(sum.machine_min_mm[i], p[k]);
+      sum.machine_max_mm[i] = std::max(sum.machine_max_mm[i], p[k]);
+      sum.work_min_mm[i] = std::min(sum.work_min_mm[i], w[k]);
+      sum.work_max_mm[i] = std::max(sum.work_max_mm[i], w[k]);
+    }
+    if (keep_path) sum.path_mm.push_back(p);
+  };
   auto check = [&](const control::Block& b) {
+    ++sum.blocks;
+    if (b.kind == control::BlockKind::kToolChange) tools.insert(b.tool);
     if (b.kind != control::BlockKind::kMotion) return;
     ++sum.motion_blocks;
     pts.clear();
     control::chord_points(b.seg, std::max(chord, 1e-4), pts);
     Eigen::Vector3d prev = b.seg.start;
+    if (!sum.has_motion) extend(b, b.seg.start);
+    sum.has_motion = true;
     for (const auto& p : pts) {
       sum.length_mm += (p - prev).norm();
       prev = p;
+      extend(b, p);
       for (std::size_t i = 0; i < cfg.machine.axes.size() && i < 3; ++i) {
         const auto& ax = cfg.machine.axes[i];
         const double x = p[static_cast<Eigen::Index>(i)];
@@ -117,9 +141,20 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src,
       }
     }
   };
+  auto finish = [&]() {
+    sum.tools.assign(tools.begin(), tools.end());
+    if (sum.path_mm.size() > ProgramSummary::kMaxPreviewPoints) {
+      // Uniform decimation, first and last point kept.
+      std::vector<Eigen::Vector3d> d;
+      const std::size_t n = sum.path_mm.size(), m = ProgramSummary::kMaxPreviewPoints;
+      for (std::size_t i = 0; i < m; ++i) d.push_back(sum.path_mm[i * (n - 1) / (m - 1)]);
+      sum.path_mm.swap(d);
+    }
+  };
   if (src.mdi) {
     sum.lines = 1;
     for (const auto& b : src.blocks) check(b);
+    finish();
     return sum;
   }
   auto in = open_source(src);
@@ -140,7 +175,36 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src,
   } catch (const control::GcodeError& e) {
     throw ProgramError(e.what());
   }
+  finish();
   return sum;
+}
+
+double ProgramPlanner::estimate_time_s(const ProgramText& src, const Eigen::Vector3d& start_mm) {
+  const control::InterpolatorParams ip = interpolator_params();
+  // The sink runs on the planner thread; read after the join below.
+  auto end_cycle = std::make_shared<double>(0.0);
+  auto job = start(src, start_mm, 0, [end_cycle](std::uint64_t, const control::PlannedSegment& s) {
+    if (s.kind != control::SegmentKind::kMotion) return;
+    *end_cycle = std::max(*end_cycle, static_cast<double>(s.start_cycle) + s.start_offset_cycles +
+                                          control::segment_duration(s));
+  });
+  // Nobody drains this job's queue but us.
+  SegmentRecord rec;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (!(job->planner_done.load(std::memory_order_acquire) && job->queue.size() == 0)) {
+    if (job->planner_failed.load(std::memory_order_acquire)) {
+      abort_and_join();
+      throw ProgramError(error());
+    }
+    if (std::chrono::steady_clock::now() > until) {
+      abort_and_join();
+      throw ProgramError(src.name + ": preview: planning took more than 120 s");
+    }
+    if (!job->queue.pop(rec)) std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  abort_and_join();
+  const int tail = (ip.fir_taps - 1) + std::max(0, ip.fir2_taps - 1);
+  return (*end_cycle + (*end_cycle > 0.0 ? tail : 0)) * ip.period_s;
 }
 
 std::shared_ptr<ProgramJob> ProgramPlanner::start(const ProgramText& src,

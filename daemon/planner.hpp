@@ -9,6 +9,7 @@
 // reported with file:line:column BEFORE any motion; then start() plans while the program runs.
 // Not RT: allocates, may throw (ProgramError), sleeps when the queue is full.
 #include <Eigen/Core>
+#include <array>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -45,6 +46,17 @@ struct ProgramSummary {
   long lines = 0;
   long motion_blocks = 0;
   double length_mm = 0.0;
+  // Preview (issue 18): every interpreted block (motion, dwell, tool change, holds, spindle...),
+  // the extents of every programmed point (arcs chorded) in machine coordinates and in the
+  // program's own (work) coordinates of each block (its G5x, G92 and tool length offsets), the
+  // tools M6 loads, and, when asked for, the path in machine coordinates (decimated to at most
+  // kMaxPreviewPoints).
+  long blocks = 0;
+  std::array<double, 3> machine_min_mm{}, machine_max_mm{}, work_min_mm{}, work_max_mm{};
+  bool has_motion = false;
+  std::vector<int> tools;
+  std::vector<Eigen::Vector3d> path_mm;
+  static constexpr std::size_t kMaxPreviewPoints = 20000;
 };
 
 class ProgramPlanner {
@@ -57,7 +69,13 @@ class ProgramPlanner {
   ProgramPlanner& operator=(const ProgramPlanner&) = delete;
 
   // Parse + soft-limit pass from start_mm. Throws ProgramError("file:line:column: message").
-  ProgramSummary validate(const ProgramText& src, const Eigen::Vector3d& start_mm) const;
+  ProgramSummary validate(const ProgramText& src, const Eigen::Vector3d& start_mm,
+                          bool keep_path = false) const;
+  // Preview: plans the whole program (the planner the run uses, on this thread's job; a job
+  // being planned is aborted first, as start() does) and returns the motion's duration at 100 %
+  // override: from the first command period to the end of the last segment's FIR tail. Holds
+  // (M0/M1/M6), spindle waits and the operator's time are not in it. Throws ProgramError.
+  double estimate_time_s(const ProgramText& src, const Eigen::Vector3d& start_mm);
 
   // Creates the job (interpolator configured at start_mm) and starts planning on a new thread.
   // A previous planner thread is aborted and joined first. sink (may be empty) sees every planned

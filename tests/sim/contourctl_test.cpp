@@ -445,6 +445,45 @@ TEST_F(ContourctlTest, GlobalOptionsBeforeOrAfterTheCommand) {
 
 // Issue 15: commands that change the machine answer with one short line; --json still prints the
 // daemon's whole reply (for hold & co. the full status object).
+// Issue 18: `load --preview` plans the whole program once and reports its extents (machine and
+// work coordinates: a CAM header with G53, T2 M6 and G43 H2), the tools, the blocks and an
+// estimated time that the run then keeps (the run adds only its settling at the end); --plot
+// draws the toolpath.
+TEST_F(ContourctlTest, LoadPreviewReportsExtentsToolsAndATimeTheRunKeeps) {
+  const std::string cam = kSrc + "/tests/data/gcode/corpus/features/fusion_style_header.ngc";
+  const Proc p = ctl({"--json", "load", cam, "--preview"});
+  ASSERT_EQ(p.rc, 0) << p.out << p.err;
+  const json r = last_json(p);
+  ASSERT_TRUE(r.is_object()) << p.out;
+  EXPECT_EQ(r.value("tools", json()), json::array({2})) << r.dump();
+  EXPECT_EQ(r.value("blocks", 0), 15) << "13 moves + T2 M6 + M30";
+  const json ex = r.value("extents", json::object());
+  // Tool 2 is 12.5 mm long in config/sim.yaml's tool table: G43 Z15 is machine Z 27.5; the
+  // final G53 Z0 is work Z -12.5 under that tool length offset.
+  EXPECT_EQ(ex["machine"]["X"], json::array({-10.0, 50.0})) << ex.dump();
+  EXPECT_EQ(ex["machine"]["Z"], json::array({0.0, 27.5})) << ex.dump();
+  EXPECT_EQ(ex["work"]["Z"], json::array({-12.5, 15.0})) << ex.dump();
+  EXPECT_GT(r["path_mm"].size(), 13u);
+  const Proc txt = ctl({"load", cam, "--preview", "--plot", (dir_ / "preview.png").string()});
+  ASSERT_EQ(txt.rc, 0) << txt.out << txt.err;
+  EXPECT_NE(txt.out.find("tools: T2"), std::string::npos) << txt.out;
+  EXPECT_NE(txt.out.find("Z  machine [    0.000,    27.500] mm   work [  -12.500,    15.000] mm"),
+            std::string::npos) << txt.out;
+  EXPECT_GT(fs::file_size(dir_ / "preview.png"), 1000u);
+  EXPECT_EQ(ctl({"load", cam, "--plot", "x.png"}).rc, 2);  // --plot needs --preview
+
+  // The estimate against the run (diamond.ngc: no holds).
+  const json d = last_json(ctl({"--json", "load", kProgram, "--preview"}));
+  const double est = d.value("estimated_time_s", 0.0);
+  ASSERT_GT(est, 1.0) << d.dump();
+  const Proc run = ctl({"--json", "run", "--wait", "--progress-interval", "0"});
+  ASSERT_EQ(run.rc, 0) << run.out << run.err;
+  const double took = last_json(run).value("duration_s", 0.0);
+  std::printf("[figure] diamond.ngc: preview estimate %.3f s, run %.3f s\n", est, took);
+  EXPECT_GE(took, est - 0.01);
+  EXPECT_LE(took, est + 0.2);
+}
+
 TEST_F(ContourctlTest, ShortConfirmationInsteadOfStatus) {
   auto line = [](const Proc& p) {
     const auto l = lines_of(p.out);

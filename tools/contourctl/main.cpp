@@ -85,7 +85,7 @@ json inline_program_args(const std::string& file, const std::string& text) {
 }
 
 // Uploads and loads (the final chunk loads): the load reply (+ bytes).
-json upload_program(Client& c, const std::string& file, const std::string& text) {
+json upload_program(Client& c, const std::string& file, const std::string& text, bool preview = false) {
   std::size_t off = 0;
   for (;;) {
     std::size_t n = std::min(kChunkBytes, text.size() - off);
@@ -98,6 +98,7 @@ json upload_program(Client& c, const std::string& file, const std::string& text)
       }
       req = {{"cmd", "upload"}, {"name", file}, {"offset", off}, {"data", text.substr(off, n)},
              {"final", off + n == text.size()}};
+      if (preview && off + n == text.size()) req["preview"] = true;
       // Escaping grows control characters up to 6x: halve until the line fits.
       if (n <= 64 || dump_utf8(req, file).size() <= kMaxRequestBytes) break;
       n /= 2;
@@ -108,15 +109,47 @@ json upload_program(Client& c, const std::string& file, const std::string& text)
   }
 }
 
-json load_program(Client& c, const std::string& file) {
+json load_program(Client& c, const std::string& file, bool preview = false) {
   const std::string text = slurp(file);
   const json a = inline_program_args(file, text);
   if (!a.is_null()) {
     json req{{"cmd", "load"}};
     req.update(a);
+    if (preview) req["preview"] = true;
     return c.call(req);
   }
-  return upload_program(c, file, text);
+  return upload_program(c, file, text, preview);
+}
+
+// `load --preview`: what was loaded, the program's extents, time, blocks and tools.
+std::string format_preview(const json& r) {
+  std::ostringstream o;
+  char b[256];
+  std::snprintf(b, sizeof b, "loaded job %llu: %s, %ld lines, %ld motion blocks, %.3f mm\n",
+                static_cast<unsigned long long>(r.value("job", 0ULL)), r.value("name", std::string()).c_str(),
+                r.value("lines", 0L), r.value("motion_blocks", 0L), r.value("length_mm", 0.0));
+  o << b;
+  const double t = r.value("estimated_time_s", 0.0);
+  std::string tools;
+  for (const auto& n : r.value("tools", json::array())) tools += " T" + std::to_string(n.get<int>());
+  std::snprintf(b, sizeof b, "preview: %ld blocks, estimated time %d min %04.1f s (100 %% override, holds not counted), tools:%s\n",
+                r.value("blocks", 0L), static_cast<int>(t / 60.0), std::fmod(t, 60.0),
+                tools.empty() ? " none" : tools.c_str());
+  o << b;
+  const json ex = r.value("extents", json::object());
+  const json mach = ex.value("machine", json::object()), work = ex.value("work", json::object());
+  for (auto it = mach.begin(); it != mach.end(); ++it) {
+    const json w = work.value(it.key(), json());
+    if (!it.value().is_array() || !w.is_array()) {
+      o << "  " << it.key() << "  no motion\n";
+      continue;
+    }
+    std::snprintf(b, sizeof b, "  %s  machine [%9.3f, %9.3f] mm   work [%9.3f, %9.3f] mm\n", it.key().c_str(),
+                  it.value()[0].get<double>(), it.value()[1].get<double>(), w[0].get<double>(),
+                  w[1].get<double>());
+    o << b;
+  }
+  return o.str();
 }
 
 // Source lines of the program's motion blocks, for "block n/N" (the daemon's status reports the
@@ -579,6 +612,11 @@ int main(int argc, char** argv) {
   app.add_subcommand("status", summary("status", "machine state"));
   auto* load = app.add_subcommand("load", summary("load", "validate and plan a part program"));
   load->add_option("PROGRAM", program, "RS274/NGC file")->required();
+  bool load_preview = false;
+  std::string preview_png;
+  load->add_flag("--preview", load_preview,
+                 "also plan the whole program: extents (machine and work), estimated time, blocks, tools");
+  load->add_option("--plot", preview_png, "with --preview: plot the toolpath to this PNG");
   auto* run = app.add_subcommand("run", "run the loaded program (or load PROGRAM first)");
   run->add_option("PROGRAM", ro.program, "RS274/NGC file");
   run->add_flag("--wait", ro.wait,
@@ -791,7 +829,20 @@ int main(int argc, char** argv) {
       return kExitOk;
     }
     if (cmd == "load") {
-      print(load_program(c, program), as_json);
+      if (!preview_png.empty() && !load_preview) {
+        std::cerr << "contourctl load: --plot needs --preview\n";
+        return 2;
+      }
+      const json r = load_program(c, program, load_preview);
+      if (load_preview && !as_json) {
+        std::cout << format_preview(r);
+      } else {
+        print(r, as_json);
+      }
+      if (!preview_png.empty()) {
+        PlotOptions o;
+        std::cout << "plot: " << plot_preview(r, preview_png, o) << " -> " << preview_png << '\n';
+      }
       return kExitOk;
     } else if (cmd == "jog") {
       req["axis"] = axis;

@@ -501,4 +501,33 @@ std::string plot_identify(const json& r, const std::string& png, const PlotOptio
   return "drive identification (" + sub.str() + ")";
 }
 
+std::string plot_preview(const json& r, const std::string& png, const PlotOptions& o) {
+  const json path = r.value("path_mm", json::array());
+  if (!path.is_array() || path.empty()) throw std::runtime_error("load reply: no path_mm (not a preview, or no motion)");
+  double zmin = 1e300, zmax = -1e300;
+  gp::TempData data(png);
+  for (const auto& p : path) {
+    const double z = p[2].get<double>();
+    zmin = std::min(zmin, z);
+    zmax = std::max(zmax, z);
+    data.out() << p[0].get<double>() << ' ' << p[1].get<double>() << ' ' << z << '\n';
+  }
+  data.close();
+  const bool three_d = zmax - zmin > 1e-6;
+  std::ostringstream sub;
+  sub << r.value("name", std::string("program")) << ": " << r.value("motion_blocks", 0L) << " moves, "
+      << r.value("length_mm", 0.0) << " mm, ~" << r.value("estimated_time_s", 0.0) << " s";
+  std::string script = gp::png_preamble(png, 1000, 900);
+  script += title_line(o, "Toolpath preview (machine coordinates)\\n" + sub.str());
+  if (three_d) {
+    script += "set xlabel 'X (mm)'\nset ylabel 'Y (mm)'\nset zlabel 'Z (mm)'\nset view equal xy\n"
+              "splot " + gp::quote(data.path()) + " using 1:2:3 with lines lc rgb '#1f77b4' notitle\n";
+  } else {
+    script += "set xlabel 'X (mm)'\nset ylabel 'Y (mm)'\nset size ratio -1\n"
+              "plot " + gp::quote(data.path()) + " using 1:2 with lines lc rgb '#1f77b4' notitle\n";
+  }
+  gp::run(script, png);
+  return std::string(three_d ? "3-D" : "XY") + " toolpath, " + std::to_string(path.size()) + " points";
+}
+
 }  // namespace contour::ctl

@@ -52,6 +52,10 @@ std::string plot_csv(PlotKind kind, const std::vector<TelemetryCsv>& runs, const
 // summary figures (mean / p99 / max lateness, last / max compute time).
 std::string plot_timing(const nlohmann::json& status, const std::string& png, const PlotOptions& o);
 
+// Toolpath preview (`load --preview` reply: path_mm in machine coordinates): 3-D when the path
+// moves in Z, else the XY plane; rapids are not told apart (the reply's path is points only).
+std::string plot_preview(const nlohmann::json& reply, const std::string& png, const PlotOptions& o);
+
 // Drive identification (`identify` reply): the recorded position (um from the start) and the
 // velocity target (mm/s) over time, the fitted model in the title.
 std::string plot_identify(const nlohmann::json& reply, const std::string& png, const PlotOptions& o);
