@@ -58,11 +58,15 @@ std::vector<CommandSpec> build_table() {
                              "name of an inline program in messages");
   add({CommandId::kStatus, "status", "machine state, positions, errors, loop timing", {}, kAnyState,
        false, false, "any", "the status object"});
+  const ArgSpec start_line = typed(
+      "start_line", ArgType::kJobNumber, false, "a line number (1: the first line)",
+      "run from line: lines before it set the modal state only; the run starts with a safe approach "
+      "(up to the clearance, across, down at the program's feed) to where that line begins");
   const ArgSpec preview = typed("preview", ArgType::kBool, false, "true or false",
                                 "also plan the whole program once and reply its extents, time, blocks, tools and path");
   add({CommandId::kLoad, "load",
        "validate (file:line:column errors, soft limits) and plan a part program",
-       {path, program, name, preview}, bits({S::kReady}), false, false,
+       {path, program, name, preview, start_line}, bits({S::kReady}), false, false,
        "READY, not jogging; exactly one of path / program",
        "{job, name, lines, motion_blocks, length_mm}; preview: also {blocks, tools, estimated_time_s, "
        "extents: {machine|work: {X: [min, max], ...}}, path_mm: [[x, y, z], ...]}"});
@@ -75,12 +79,13 @@ std::vector<CommandSpec> build_table() {
          {typed("name", ArgType::kString, true, "a non-empty string", "the program's name"), off,
           typed("data", ArgType::kString, true, "a string", "the next chunk of the program text"),
           typed("final", ArgType::kBool, false, "true or false", "last chunk: load the program"),
-          preview},
+          preview, start_line},
          bits({S::kReady}), false, false, "READY for the final chunk (one upload at a time)",
          "{name, bytes, complete}; final: as `load` plus bytes"});
   }
   add({CommandId::kRun, "run", "start the loaded program (or load path / program first)",
-       {path, program, name}, bits({S::kReady}), false, false, "READY with a program loaded",
+       {path, program, name, start_line}, bits({S::kReady}), false, false,
+       "READY with a program loaded (start_line: with path / program)",
        "{job, state}"});
   add({CommandId::kResult, "result",
        "run figures of a job: state, duration_s, max/rms_contour_error_um, faults, overruns",

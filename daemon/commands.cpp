@@ -416,6 +416,7 @@ json Daemon::cmd_load(const json& req) {
       src.name = req["name"].get<std::string>();
     }
   }
+  if (req.contains("start_line")) src.start_line = req.at("start_line").get<long>();
   return load_source(src, req.value("preview", false));
 }
 
@@ -431,6 +432,10 @@ json Daemon::load_source(const ProgramText& src, bool preview) {
   double estimated_s = 0.0;
   try {
     sum = planner_->validate(src, start, preview);
+    if (src.start_line > sum.lines) {
+      throw CommandError("load: start_line " + std::to_string(src.start_line) + " is past the end of " +
+                         src.name + " (" + std::to_string(sum.lines) + " lines)");
+    }
     if (preview) estimated_s = planner_->estimate_time_s(src, start);
   } catch (const ProgramError& e) {
     throw CommandError(std::string("load: ") + e.what());
@@ -851,6 +856,9 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kUpload: return cmd_upload(req, client);
     case CommandId::kRun: {
       require_homed("run");  // before a load: a refused run leaves nothing loaded
+      if (req.contains("start_line") && !req.contains("path") && !req.contains("program")) {
+        throw CommandError("run: start_line needs the program (path or program): it is planned again from there");
+      }
       if (req.contains("path") || req.contains("program")) cmd_load(req);
       const auto st = loop_->status();
       if (st.state != S::kReady) throw CommandError("run is not allowed in state " + state_name());

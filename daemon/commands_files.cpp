@@ -77,6 +77,7 @@ json Daemon::cmd_upload(const json& req, const ClientInfo& client) {
   src.text = std::move(upload_->text);
   upload_.reset();
   const std::size_t bytes = src.text.size();
+  if (req.contains("start_line")) src.start_line = req.at("start_line").get<long>();
   json r = load_source(src, req.value("preview", false));
   r["bytes"] = bytes;
   return r;

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -302,6 +303,34 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
     std::size_t n_messages = 0;  // planner messages copied into messages_
     bool mdi_pushed = false;
     auto aborted = [&] { return job->abort.load(std::memory_order_acquire); };
+    // Run from line: what the skipped lines leave behind.
+    long line_no = 0;
+    bool skipping = !src.mdi && src.start_line > 1;
+    Eigen::Vector3d at = start_mm;  // where the program stands after the skipped lines
+    double clearance_z = start_mm.z();
+    double feed = 0.0;  // last programmed feed (mm/min) of a skipped feed move
+    std::optional<control::Block> tool_change;
+    auto approach = [&](const control::Block& first) {
+      auto move = [&](const Eigen::Vector3d& from, const Eigen::Vector3d& to, bool rapid) {
+        if ((to - from).norm() < 1e-9) return;
+        control::Block m = first;  // the modal state of the first executed block
+        m.kind = control::BlockKind::kMotion;
+        m.seg = control::PathSegment::line(from, to);
+        m.rapid = rapid || !(feed > 0.0);
+        m.feed_mm_min = m.rapid ? setup.rapid_mm_min : feed;
+        m.blend = control::BlendMode::kExactStop;
+        m.message.clear();
+        m.user_m = 0;
+        planner.push(m);
+      };
+      if (tool_change) planner.push(*tool_change);
+      const double z_safe = std::max({clearance_z, start_mm.z(), at.z()});
+      const Eigen::Vector3d up(start_mm.x(), start_mm.y(), z_safe);
+      const Eigen::Vector3d over(at.x(), at.y(), z_safe);
+      move(start_mm, up, true);
+      move(up, over, true);
+      move(over, at, false);
+    };
     while (!aborted()) {
       if (planner.messages().size() > n_messages) {
         std::lock_guard lk(mu_);
@@ -337,11 +366,28 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
         continue;
       }
       if (std::getline(*in, text)) {
+        ++line_no;
         parser->parse_line(text, blocks);
       } else {
         parser->finish(blocks);
       }
-      for (const auto& b : blocks) planner.push(b);
+      for (const auto& b : blocks) {
+        if (skipping && line_no < src.start_line && b.kind != control::BlockKind::kEnd) {
+          if (b.kind == control::BlockKind::kMotion) {
+            at = b.seg.end;
+            clearance_z = std::max({clearance_z, b.seg.start.z(), b.seg.end.z()});
+            if (!b.rapid) feed = b.feed_mm_min;
+          } else if (b.kind == control::BlockKind::kToolChange) {
+            tool_change = b;
+          }
+          continue;
+        }
+        if (skipping) {
+          skipping = false;
+          approach(b);
+        }
+        planner.push(b);
+      }
       blocks.clear();
     }
     commit_machine();

@@ -35,6 +35,13 @@ struct ProgramText {
   // true, path/text are ignored and these blocks (the last one a kEnd) are the program.
   bool mdi = false;
   std::vector<control::Block> blocks{};
+  // Run from line (issue 18, LinuxCNC's "run from line"): lines before start_line are interpreted
+  // (modal state, offsets, tool, spindle and coolant recovered) but not executed; the run begins
+  // with the last skipped M6 (if any: the operator confirms the tool), then a safe approach to
+  // where line start_line begins: straight up to the clearance (the highest Z so far, or where
+  // Z stands if higher), across at it as a rapid, then down to the start point at the program's
+  // feed. 0 or 1: from the beginning.
+  long start_line = 0;
 };
 
 class ProgramError : public std::runtime_error {

@@ -484,6 +484,21 @@ TEST_F(ContourctlTest, LoadPreviewReportsExtentsToolsAndATimeTheRunKeeps) {
   EXPECT_LE(took, est + 0.2);
 }
 
+// Issue 18: run from line through the daemon. diamond.ngc from line 8 (X10 Y-10 F1500): the run
+// goes up (Z stays: no clearance above), across to (20, 0) where line 8 begins, and runs lines 8
+// and 9 to (0, 0). A start line past the end, or without the program, is refused.
+TEST_F(ContourctlTest, RunFromLineStartsWithASafeApproach) {
+  const Proc far = ctl({"run", kProgram, "--from-line", "99"});
+  EXPECT_NE(far.rc, 0);
+  EXPECT_NE(far.err.find("start_line 99 is past the end"), std::string::npos) << far.err;
+  const Proc p = ctl({"--json", "run", kProgram, "--from-line", "8", "--wait", "--progress-interval", "0"});
+  ASSERT_EQ(p.rc, 0) << p.out << p.err;
+  EXPECT_TRUE(last_json(p).value("completed", false)) << p.out;
+  const json st = last_json(ctl({"--json", "status"}));
+  EXPECT_NEAR(st["ref_mm"][0].get<double>(), 0.0, 1e-6) << st.dump();
+  EXPECT_NEAR(st["ref_mm"][1].get<double>(), 0.0, 1e-6) << st.dump();
+}
+
 TEST_F(ContourctlTest, ShortConfirmationInsteadOfStatus) {
   auto line = [](const Proc& p) {
     const auto l = lines_of(p.out);

@@ -85,7 +85,8 @@ json inline_program_args(const std::string& file, const std::string& text) {
 }
 
 // Uploads and loads (the final chunk loads): the load reply (+ bytes).
-json upload_program(Client& c, const std::string& file, const std::string& text, bool preview = false) {
+json upload_program(Client& c, const std::string& file, const std::string& text, bool preview = false,
+                    long start_line = 0) {
   std::size_t off = 0;
   for (;;) {
     std::size_t n = std::min(kChunkBytes, text.size() - off);
@@ -99,6 +100,7 @@ json upload_program(Client& c, const std::string& file, const std::string& text,
       req = {{"cmd", "upload"}, {"name", file}, {"offset", off}, {"data", text.substr(off, n)},
              {"final", off + n == text.size()}};
       if (preview && off + n == text.size()) req["preview"] = true;
+      if (start_line > 0 && off + n == text.size()) req["start_line"] = start_line;
       // Escaping grows control characters up to 6x: halve until the line fits.
       if (n <= 64 || dump_utf8(req, file).size() <= kMaxRequestBytes) break;
       n /= 2;
@@ -109,16 +111,17 @@ json upload_program(Client& c, const std::string& file, const std::string& text,
   }
 }
 
-json load_program(Client& c, const std::string& file, bool preview = false) {
+json load_program(Client& c, const std::string& file, bool preview = false, long start_line = 0) {
   const std::string text = slurp(file);
   const json a = inline_program_args(file, text);
   if (!a.is_null()) {
     json req{{"cmd", "load"}};
     req.update(a);
     if (preview) req["preview"] = true;
+    if (start_line > 0) req["start_line"] = start_line;
     return c.call(req);
   }
-  return upload_program(c, file, text, preview);
+  return upload_program(c, file, text, preview, start_line);
 }
 
 // `load --preview`: what was loaded, the program's extents, time, blocks and tools.
@@ -287,6 +290,7 @@ struct RunOptions {
   double timeout_s = 3600.0;
   bool quiet = false;
   double progress_interval_s = 1.0;  // non-TTY progress lines
+  long from_line = 0;                // run from line (0: from the beginning)
 };
 
 // `home AXIS | --all`: starts homing, prints each axis' phase as it changes, and waits until the
@@ -347,14 +351,14 @@ int cmd_run(Client& c, const RunOptions& o, bool as_json) {
     if (o.wait) {
       // Load first (same as run with a program: the daemon's run loads it the same way): the load
       // reply carries the program length and motion-block count the progress display needs.
-      const json lr = load_program(c, o.program);
+      const json lr = load_program(c, o.program, false, o.from_line);
       total_mm = lr.value("length_mm", 0.0);
       n_blocks = lr.value("motion_blocks", std::size_t{0});
       lines = motion_lines(o.program);
     } else {
       const json a = inline_program_args(o.program, slurp(o.program));
-      if (a.is_null()) {
-        load_program(c, o.program);  // then `run` runs the loaded program
+      if (a.is_null() || o.from_line > 0) {
+        load_program(c, o.program, false, o.from_line);  // then `run` runs the loaded program
       } else {
         req.update(a);
       }
@@ -619,6 +623,10 @@ int main(int argc, char** argv) {
   load->add_option("--plot", preview_png, "with --preview: plot the toolpath to this PNG");
   auto* run = app.add_subcommand("run", "run the loaded program (or load PROGRAM first)");
   run->add_option("PROGRAM", ro.program, "RS274/NGC file");
+  run->add_option("--from-line", ro.from_line,
+                  "run from line N: the lines before it set the modal state only; the run starts "
+                  "with the last skipped M6 and a safe approach (up, across, down at feed)")
+      ->check(CLI::Range(1L, 100000000L));
   run->add_flag("--wait", ro.wait,
                 "show progress until the program ends, then its figures; Ctrl-C holds");
   run->add_option("--timeout", ro.timeout_s, "seconds to wait with --wait");
