@@ -61,7 +61,7 @@ std::vector<CommandSpec> build_table() {
   const ArgSpec start_line = typed(
       "start_line", ArgType::kJobNumber, false, "a line number (1: the first line)",
       "run from line: lines before it set the modal state only; the run starts with a safe approach "
-      "(up to the clearance, across, down at the program's feed) to where that line begins");
+      "(up to the clearance, across, down at the modal feed) to where that line begins");
   const ArgSpec preview = typed("preview", ArgType::kBool, false, "true or false",
                                 "also plan the whole program once and reply its extents, time, blocks, tools and path");
   add({CommandId::kLoad, "load",

@@ -4,7 +4,6 @@
 #include <chrono>
 #include <fstream>
 #include <limits>
-#include <optional>
 #include <set>
 #include <sstream>
 
@@ -121,6 +120,9 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src, const Eigen::Vec
     if (b.kind == control::BlockKind::kToolChange) tools.insert(b.tool);
     if (b.kind != control::BlockKind::kMotion) return;
     ++sum.motion_blocks;
+    if (!src.mdi && sum.lines < src.start_line) {
+      sum.clearance_z_mm = std::max({sum.clearance_z_mm, b.seg.start.z(), b.seg.end.z()});
+    }
     pts.clear();
     control::chord_points(b.seg, std::max(chord, 1e-4), pts);
     Eigen::Vector3d prev = b.seg.start;
@@ -291,6 +293,7 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
     control::ProgramSetup setup = config::to_program_setup(cfg.program, cfg.interpolator);
     setup.start_mm = start_mm;
     if (machine_ != nullptr) setup.machine = machine_->snapshot();
+    if (!src.mdi && src.start_line > 1) setup.run_from_line = static_cast<int>(src.start_line);
     std::unique_ptr<std::istream> in;
     if (!src.mdi) {
       in = open_source(src);
@@ -303,14 +306,15 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
     std::size_t n_messages = 0;  // planner messages copied into messages_
     bool mdi_pushed = false;
     auto aborted = [&] { return job->abort.load(std::memory_order_acquire); };
-    // Run from line: what the skipped lines leave behind.
-    long line_no = 0;
-    bool skipping = !src.mdi && src.start_line > 1;
-    Eigen::Vector3d at = start_mm;  // where the program stands after the skipped lines
-    double clearance_z = start_mm.z();
-    double feed = 0.0;  // last programmed feed (mm/min) of a skipped feed move
-    std::optional<control::Block> tool_change;
+    // Run from line: the parser interprets the lines before the start line without emitting
+    // them (ProgramSetup::run_from_line); at the first block it emits, resume_state() is the
+    // state there. The clearance: the highest Z before it (a validate() pass).
+    bool approach_due = !src.mdi && src.start_line > 1;
+    const double clearance_z_mm = approach_due ? validate(src, start_mm).clearance_z_mm : 0.0;
     auto approach = [&](const control::Block& first) {
+      const control::ModalState rs = parser->resume_state().value_or(parser->modal_state());
+      const Eigen::Vector3d at = rs.position_mm;  // where line start_line begins
+      const double feed = rs.feed_mm_min;
       auto move = [&](const Eigen::Vector3d& from, const Eigen::Vector3d& to, bool rapid) {
         if ((to - from).norm() < 1e-9) return;
         control::Block m = first;  // the modal state of the first executed block
@@ -323,8 +327,18 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
         m.user_m = 0;
         planner.push(m);
       };
-      if (tool_change) planner.push(*tool_change);
-      const double z_safe = std::max({clearance_z, start_mm.z(), at.z()});
+      // A tool the skipped lines changed to (M6) that is not in the spindle: its pause first.
+      const int tool_before = setup.machine ? setup.machine->tool_in_spindle : 0;
+      if (rs.tool != tool_before && rs.tool > 0) {
+        control::Block tc = first;
+        tc.kind = control::BlockKind::kToolChange;
+        tc.seg = control::PathSegment::line(start_mm, start_mm);
+        tc.tool = rs.tool;
+        tc.message = "run from line " + std::to_string(src.start_line) + ": insert tool " +
+                     std::to_string(rs.tool) + ", then resume";
+        planner.push(tc);
+      }
+      const double z_safe = std::max({clearance_z_mm, start_mm.z(), at.z()});
       const Eigen::Vector3d up(start_mm.x(), start_mm.y(), z_safe);
       const Eigen::Vector3d over(at.x(), at.y(), z_safe);
       move(start_mm, up, true);
@@ -366,24 +380,13 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
         continue;
       }
       if (std::getline(*in, text)) {
-        ++line_no;
         parser->parse_line(text, blocks);
       } else {
         parser->finish(blocks);
       }
       for (const auto& b : blocks) {
-        if (skipping && line_no < src.start_line && b.kind != control::BlockKind::kEnd) {
-          if (b.kind == control::BlockKind::kMotion) {
-            at = b.seg.end;
-            clearance_z = std::max({clearance_z, b.seg.start.z(), b.seg.end.z()});
-            if (!b.rapid) feed = b.feed_mm_min;
-          } else if (b.kind == control::BlockKind::kToolChange) {
-            tool_change = b;
-          }
-          continue;
-        }
-        if (skipping) {
-          skipping = false;
+        if (approach_due) {
+          approach_due = false;
           approach(b);
         }
         planner.push(b);

@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
@@ -37,10 +38,10 @@ struct ProgramText {
   std::vector<control::Block> blocks{};
   // Run from line (issue 18, LinuxCNC's "run from line"): lines before start_line are interpreted
   // (modal state, offsets, tool, spindle and coolant recovered) but not executed; the run begins
-  // with the last skipped M6 (if any: the operator confirms the tool), then a safe approach to
-  // where line start_line begins: straight up to the clearance (the highest Z so far, or where
-  // Z stands if higher), across at it as a rapid, then down to the start point at the program's
-  // feed. 0 or 1: from the beginning.
+  // with a tool-change pause when the tool they leave in the spindle is not the machine's, then a
+  // safe approach to where line start_line begins: straight up to the clearance (the highest Z
+  // so far, or where Z stands if higher), across at it as a rapid, then down to the start point
+  // at the modal feed. 0 or 1: from the beginning.
   long start_line = 0;
 };
 
@@ -59,6 +60,9 @@ struct ProgramSummary {
   // tools M6 loads, and, when asked for, the path in machine coordinates (decimated to at most
   // kMaxPreviewPoints).
   long blocks = 0;
+  // With ProgramText::start_line: the highest machine Z of the moves before that line (-inf when
+  // none): run from line's clearance.
+  double clearance_z_mm = -std::numeric_limits<double>::infinity();
   std::array<double, 3> machine_min_mm{}, machine_max_mm{}, work_min_mm{}, work_max_mm{};
   bool has_motion = false;
   std::vector<int> tools;

@@ -625,7 +625,7 @@ int main(int argc, char** argv) {
   run->add_option("PROGRAM", ro.program, "RS274/NGC file");
   run->add_option("--from-line", ro.from_line,
                   "run from line N: the lines before it set the modal state only; the run starts "
-                  "with the last skipped M6 and a safe approach (up, across, down at feed)")
+                  "with a safe approach (up to the clearance, across, down at feed)")
       ->check(CLI::Range(1L, 100000000L));
   run->add_flag("--wait", ro.wait,
                 "show progress until the program ends, then its figures; Ctrl-C holds");

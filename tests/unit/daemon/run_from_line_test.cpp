@@ -1,6 +1,7 @@
 // Run from line (issue 18, LinuxCNC's "run from line"): the lines before the start line set the
-// modal state only; the run begins with the last skipped M6 and a safe approach (up to the
-// clearance, across as a rapid, down at the program's feed) to where the start line begins.
+// modal state only; the run begins with a tool-change pause when they changed the tool, and a
+// safe approach (up to the clearance, across as a rapid, down at the modal feed) to where the
+// start line begins.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -66,7 +67,7 @@ TEST(RunFromLine, SkippedLinesSetTheStateAndASafeApproachLeadsToTheStartLine) {
   const Eigen::Vector3d start(5.0, 5.0, 0.0);
   const auto segs = plan_all(p, src, start);
   ASSERT_FALSE(segs.empty());
-  // The last skipped M6 comes first: the operator confirms tool 2.
+  // The skipped lines loaded tool 2 (the machine has none): its pause comes first.
   EXPECT_EQ(segs.front().kind, control::SegmentKind::kToolChange);
   EXPECT_EQ(segs.front().tool, 2);
   const auto m = motion(segs);
