@@ -78,6 +78,7 @@ ProgramConfig parse_program(Section& s) {
   c.arc_tolerance_inch = s.number("arc_tolerance_inch", c.arc_tolerance_inch, 4e-8, 0.04);
   c.subroutine_path = subroutine_dirs(s);
   c.require_program_end = s.boolean("require_program_end", c.require_program_end);
+  c.block_delete = s.boolean("block_delete", c.block_delete);
   c.var_file = s.string("var_file", "");
   if (s.has("var_file") && c.var_file.empty()) s.error("var_file", "must be a file name");
   c.tool_table = s.string("tool_table", "");
@@ -99,6 +100,7 @@ control::ProgramSetup to_program_setup(const ProgramConfig& p, const Interpolato
   st.g30_mm = v(p.g30_mm);
   st.start_mm = v(p.start_mm);
   st.rapid_mm_min = p.rapid_mm_min;
+  st.block_delete = p.block_delete;
   st.arc_tolerance_mm = p.arc_tolerance_mm;
   st.arc_tolerance_inch = p.arc_tolerance_inch;
   st.default_blend = i.blend;

@@ -14,6 +14,7 @@
 //                                                     the program does not define it (each dir,
 //                                                     then its subdirectories, as LinuxCNC does);
 //                                                     absolute paths of existing directories
+//   block_delete: false                               '/' switch at start-up (`switches`)
 //   require_program_end: false                        true: a program without M2/M30/'%' is
 //                                                     refused at its end (LinuxCNC's rule)
 //   var_file: state/machine.var                       LinuxCNC parameter file the daemon loads
@@ -46,6 +47,7 @@ struct ProgramConfig {
   double arc_tolerance_inch = 0.0028284271247461905;
   std::vector<std::string> subroutine_path;
   bool require_program_end = false;
+  bool block_delete = false;  // '/' lines skipped (the switch's start-up state)
   std::string var_file;    // as written in the YAML ("" = none)
   std::string tool_table;  // as written in the YAML ("" = none)
 };

@@ -159,6 +159,8 @@ class Interpolator {
   // change, so the time scale never steps.
   InterpStatus step(double feed_ratio, double rapid_ratio, InterpOutput& out) noexcept;
   void resume() noexcept;
+  // The optional stop switch (M1 holds when on), live: judged when the path reaches an M1.
+  void set_optional_stop(bool on) noexcept { p_.optional_stop = on; }
 
   // Reference point at an integer plan time using the queued segments (RT-safe, no state change).
   [[nodiscard]] Eigen::Vector3d position_at(std::int64_t t, double* progress_mm = nullptr,

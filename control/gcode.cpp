@@ -54,6 +54,7 @@ GcodeParser& GcodeParser::operator=(GcodeParser&&) noexcept = default;
 
 void GcodeParser::parse_line(std::string_view text, std::vector<Block>& out) { impl_->push_line(text, out); }
 void GcodeParser::finish(std::vector<Block>& out) { impl_->finish(out); }
+void GcodeParser::set_block_delete(bool on) { impl_->set_block_delete(on); }
 bool GcodeParser::ended() const { return impl_->ended(); }
 int GcodeParser::line_number() const { return impl_->line_number(); }
 const Eigen::Vector3d& GcodeParser::position_mm() const { return impl_->position_mm(); }

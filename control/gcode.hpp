@@ -195,6 +195,9 @@ class GcodeParser {
   // End of input; appends a kEnd block if the program did not end itself (or throws with
   // ProgramSetup::require_program_end, or when a subroutine/loop/if is still open).
   void finish(std::vector<Block>& out);
+  // The block delete switch ('/'), live: applies from the next line read (LinuxCNC's switch acts
+  // on the lines the interpreter reads after it is flipped).
+  void set_block_delete(bool on);
 
   [[nodiscard]] bool ended() const;
   [[nodiscard]] int line_number() const;

@@ -174,6 +174,7 @@ class Interpreter {
   // Streaming main program.
   void push_line(std::string_view text, std::vector<Block>& out);
   void finish(std::vector<Block>& out);
+  void set_block_delete(bool on) { setup_.block_delete = on; }
   // One MDI command (no program file): executes it now, with the current modal state.
   void mdi(std::string_view text, std::vector<Block>& out);
   void set_position_mm(const Eigen::Vector3d& machine_mm);

@@ -248,6 +248,13 @@ std::vector<CommandSpec> build_table() {
        "rms_residual_um, excursion_mm, configured: {gain_per_s, tau_ms, delay_cycles}, "
        "delay_matches, gain_deviation_percent, tau_deviation_percent, verdict, record: "
        "{period_s, v_cmd_mm_s, position_mm}}"});
+  add({CommandId::kSwitches, "switches",
+       "the operator's program switches, as in LinuxCNC: block delete ('/' lines skipped, from the "
+       "next line the interpreter reads) and optional stop (M1 holds, judged when the path reaches "
+       "it); no argument: get",
+       {typed("block_delete", ArgType::kBool, false, "true or false", "the block delete switch"),
+        typed("optional_stop", ArgType::kBool, false, "true or false", "the optional stop switch")},
+       kAnyState, false, false, "any", "{block_delete, optional_stop}: as they are from the next cycle"});
   add({CommandId::kShutdown, "shutdown", "controlled stop, drives disabled, exit 0", {}, kAnyState,
        false, false, "any", "{shutting_down}"});
   return t;

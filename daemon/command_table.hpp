@@ -27,7 +27,7 @@ namespace contour::daemon {
 enum class CommandId : std::uint8_t {
   kStatus, kLoad, kUpload, kRun, kResult, kHold, kResume, kStop, kEstop, kReset, kEnable, kDisable, kJog,
   kSetPosition, kHome, kGains, kOverride, kRecord, kSubscribe, kUnsubscribe, kForce, kSimGpio,
-  kShutdown, kIo, kPlcStatus, kOffsets, kTools, kTouchOff, kMdi, kIdentify,
+  kShutdown, kIo, kPlcStatus, kOffsets, kTools, kTouchOff, kMdi, kIdentify, kSwitches,
 };
 
 enum class ArgType : std::uint8_t {

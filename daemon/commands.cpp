@@ -131,6 +131,7 @@ json Daemon::status_json() {
          {"rapid_override", st.rapid_override},
          {"spindle_override", st.spindle_override},
          {"on_rapid", st.on_rapid},
+         {"switches", {{"block_delete", planner_->block_delete()}, {"optional_stop", st.optional_stop}}},
          {"job", st.attached_job},
          {"loaded_job", loaded_job_},
          {"finished_job", st.finished_job},
@@ -980,6 +981,17 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
     case CommandId::kTools: return cmd_tools(req);
     case CommandId::kTouchOff: return cmd_touch_off(req);
     case CommandId::kMdi: return cmd_mdi(req);
+    case CommandId::kSwitches: {
+      if (req.contains("block_delete")) planner_->set_block_delete(req.at("block_delete").get<bool>());
+      bool optional_stop = loop_->status().optional_stop;
+      if (req.contains("optional_stop")) {
+        optional_stop = req.at("optional_stop").get<bool>();
+        if (!loop_->post({CommandKind::kSetOptionalStop, 0, optional_stop ? 1.0 : 0.0, 0.0})) {
+          throw CommandError("command queue full; retry");
+        }
+      }
+      return {{"block_delete", planner_->block_delete()}, {"optional_stop", optional_stop}};
+    }
     case CommandId::kIdentify: {
       json r = identify_on_loop(*loop_, cfg_, axis_index(req.at("axis"), cfg_.machine),
                                 [this] { return safety_request_waiting(); });

@@ -78,6 +78,7 @@ std::string_view to_string(CommandKind k) noexcept {
     case CommandKind::kIdentify: return "identify";
     case CommandKind::kJogBrake: return "jog brake (dead-man)";
     case CommandKind::kHome: return "home";
+    case CommandKind::kSetOptionalStop: return "optional stop switch";
   }
   return "?";
 }

@@ -44,7 +44,7 @@ control::PlannerParams planner_params(const config::Config& cfg) {
 
 }  // namespace
 
-ProgramPlanner::ProgramPlanner(const config::Config& cfg) : cfg_(cfg) {
+ProgramPlanner::ProgramPlanner(const config::Config& cfg) : cfg_(cfg), block_delete_(cfg.program.block_delete) {
   if (!cfg.program.var_file.empty() || !cfg.program.tool_table.empty()) {
     try {
       own_machine_ = std::make_unique<MachineData>(
@@ -95,6 +95,7 @@ ProgramSummary ProgramPlanner::validate(const ProgramText& src, const Eigen::Vec
   const config::Config cfg = config_snapshot();
   control::ProgramSetup setup = config::to_program_setup(cfg.program, cfg.interpolator);
   setup.start_mm = start_mm;
+  setup.block_delete = block_delete();
   if (machine_ != nullptr) setup.machine = machine_->snapshot();
   std::vector<Eigen::Vector3d> pts;
   ProgramSummary sum;
@@ -292,6 +293,7 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
   try {
     control::ProgramSetup setup = config::to_program_setup(cfg.program, cfg.interpolator);
     setup.start_mm = start_mm;
+    setup.block_delete = block_delete();
     if (machine_ != nullptr) setup.machine = machine_->snapshot();
     if (!src.mdi && src.start_line > 1) setup.run_from_line = static_cast<int>(src.start_line);
     std::unique_ptr<std::istream> in;
@@ -380,6 +382,7 @@ void ProgramPlanner::plan(std::shared_ptr<ProgramJob> job, ProgramText src,
         continue;
       }
       if (std::getline(*in, text)) {
+        parser->set_block_delete(block_delete());
         parser->parse_line(text, blocks);
       } else {
         parser->finish(blocks);

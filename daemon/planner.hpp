@@ -88,6 +88,11 @@ class ProgramPlanner {
   // (M0/M1/M6), spindle waits and the operator's time are not in it. Throws ProgramError.
   double estimate_time_s(const ProgramText& src, const Eigen::Vector3d& start_mm);
 
+  // The block delete switch (program.block_delete at start-up): read by validate() and, line by
+  // line, by the planning thread (a running program sees it from the next line it reads).
+  void set_block_delete(bool on) noexcept { block_delete_.store(on, std::memory_order_relaxed); }
+  [[nodiscard]] bool block_delete() const noexcept { return block_delete_.load(std::memory_order_relaxed); }
+
   // Creates the job (interpolator configured at start_mm) and starts planning on a new thread.
   // A previous planner thread is aborted and joined first. sink (may be empty) sees every planned
   // segment (the telemetry writer's geometry for the true contour error).
@@ -138,6 +143,7 @@ class ProgramPlanner {
   std::thread thread_;
   std::shared_ptr<ProgramJob> job_;
   mutable std::mutex mu_;
+  std::atomic<bool> block_delete_{false};
   std::string error_;
   std::uint64_t messages_job_ = 0;
   std::vector<std::string> messages_;  // of messages_job_, copied from the planner thread

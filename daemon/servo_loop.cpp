@@ -74,6 +74,7 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
     }
   }
   limits_ = live_limits_from(cfg);
+  optional_stop_ = cfg.interpolator.optional_stop;
   validate(limits_, axes_);
   limits_eff_ = limits_;
   applied_limits_ = staged_limits_ = limits_;
@@ -485,6 +486,9 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
         jog_.brake(ref_[jog_.axis()], limits_.max_accel_mm_s2[static_cast<std::size_t>(jog_.axis())]);
       }
       break;
+    case CommandKind::kSetOptionalStop:
+      optional_stop_ = c.a != 0.0;
+      break;
     case CommandKind::kSetOverride: {
       const double v = std::isfinite(c.a) ? c.a : 0.0;
       if (c.axis == kOverrideRapid) {
@@ -819,6 +823,7 @@ void ServoLoop::program_step(MachineState st, RefPoint& r) noexcept {
   in.override_ratio = feed_override_ * force_.feed_override();
   in.rapid_override_ratio = rapid_override_;  // no cutting on a rapid: neither feed nor force
   in.spindle_override = spindle_override_;
+  in.optional_stop = optional_stop_;
   using Wait = config::SpindleConfig::Wait;
   const Wait policy = cfg_.spindle.at_speed_wait;
   in.wait_for_spindle = spindle_.present() && (policy == Wait::kAlways ||
@@ -1175,6 +1180,7 @@ void ServoLoop::publish() noexcept {
   pub_.rapid_override = rapid_override_;
   pub_.spindle_override = spindle_override_;
   pub_.on_rapid = io.rapid;
+  pub_.optional_stop = optional_stop_;
   pub_.attached_job = program_.attached() ? program_.job()->id : 0;
   pub_.finished_job = finished_job_;
   pub_.finished_ok = finished_ok_;

@@ -70,6 +70,7 @@ enum class CommandKind : std::uint8_t {
   kIdentify,     // axis: play the identification excitation on it (READY, nothing loaded/jogging)
   kJogBrake,     // brake a jog at the axis' deceleration (continuous jog's dead-man); else nothing
   kHome,         // axis (-1: every axis with a homing method, in home.sequence order); READY
+  kSetOptionalStop,  // a != 0: M1 holds (the optional stop switch), live
 };
 
 // Drive identification (issue 16, `contourctl identify`): the loop plays a preallocated velocity
@@ -175,6 +176,7 @@ struct LoopStatus {
   double rapid_override = 1.0;    // ratio, for rapids (G0); the feed override does not apply to them
   double spindle_override = 1.0;  // ratio of the programmed spindle speed
   bool on_rapid = false;          // the path is on a rapid: override_applied follows rapid_override
+  bool optional_stop = false;     // the M1 switch
   std::uint64_t attached_job = 0;   // program the loop is executing (0 = none)
   std::uint64_t finished_job = 0;   // last program that ended (done, stopped or aborted)
   bool finished_ok = false;         // finished_job ran to its end
@@ -454,6 +456,7 @@ class ServoLoop {
   double feed_override_ = 1.0;
   double rapid_override_ = 1.0;
   double spindle_override_ = 1.0;
+  bool optional_stop_ = false;  // interpolator.optional_stop at start-up
   bool recording_ = false;
   int fault_axis_ = -1;
   double fault_value_ = 0.0, fault_limit_ = 0.0;

@@ -499,6 +499,23 @@ TEST_F(ContourctlTest, RunFromLineStartsWithASafeApproach) {
   EXPECT_NEAR(st["ref_mm"][1].get<double>(), 0.0, 1e-6) << st.dump();
 }
 
+// Issue 18: the block delete and optional stop switches, settable at any time, in status.
+TEST_F(ContourctlTest, SwitchesSetAndShow) {
+  EXPECT_EQ(lines_of(ctl({"switches"}).out).back(), "switches: block delete off, optional stop off");
+  EXPECT_EQ(lines_of(ctl({"switches", "--block-delete", "on", "--optional-stop", "on"}).out).back(),
+            "switches: block delete on, optional stop on");
+  const json st = last_json(ctl({"--json", "status"}));
+  EXPECT_EQ(st["switches"], json({{"block_delete", true}, {"optional_stop", true}})) << st.dump();
+  EXPECT_NE(ctl({"switches", "--optional-stop", "maybe"}).rc, 0);
+  // With block delete on, a '/' line is not in the program.
+  std::ofstream(dir_ / "bd.ngc") << "G21 G90\n/G1 X5 F600\nG1 X1 F600\nM2\n";
+  const json on = last_json(ctl({"--json", "load", (dir_ / "bd.ngc").string()}));
+  EXPECT_EQ(on.value("motion_blocks", -1), 1) << on.dump();
+  ASSERT_EQ(ctl({"switches", "--block-delete", "off"}).rc, 0);
+  const json off = last_json(ctl({"--json", "load", (dir_ / "bd.ngc").string()}));
+  EXPECT_EQ(off.value("motion_blocks", -1), 2) << off.dump();
+}
+
 TEST_F(ContourctlTest, ShortConfirmationInsteadOfStatus) {
   auto line = [](const Proc& p) {
     const auto l = lines_of(p.out);

@@ -222,6 +222,11 @@ std::string confirmation(const std::string& cmd, const json& r) {
                   r["axis"].get<std::string>().c_str(), r["position_mm"].get<double>());
     return b;
   }
+  if (cmd == "switches" && r.contains("block_delete")) {
+    std::snprintf(b, sizeof b, "switches: block delete %s, optional stop %s",
+                  r.value("block_delete", false) ? "on" : "off", r.value("optional_stop", false) ? "on" : "off");
+    return b;
+  }
   if (cmd == "override" && r.contains("feed_override_percent")) {
     std::snprintf(b, sizeof b, "override: feed %g %%, rapid %g %%, spindle %g %%",
                   r["feed_override_percent"].get<double>(), r.value("rapid_override_percent", 100.0),
@@ -614,6 +619,12 @@ int main(int argc, char** argv) {
   bool both = false, ccw_flag = false, cw_flag = false;
 
   app.add_subcommand("status", summary("status", "machine state"));
+  std::string sw_block_delete, sw_optional_stop;
+  auto* sw = app.add_subcommand("switches", summary("switches", "block delete and optional stop switches") +
+                                                " (switches [--block-delete on|off] [--optional-stop on|off])");
+  sw->add_option("--block-delete", sw_block_delete, "on: lines starting with '/' are skipped")
+      ->check(CLI::IsMember({"on", "off"}));
+  sw->add_option("--optional-stop", sw_optional_stop, "on: M1 holds")->check(CLI::IsMember({"on", "off"}));
   auto* load = app.add_subcommand("load", summary("load", "validate and plan a part program"));
   load->add_option("PROGRAM", program, "RS274/NGC file")->required();
   bool load_preview = false;
@@ -885,6 +896,9 @@ int main(int argc, char** argv) {
     } else if (cmd == "set-position") {
       req["axis"] = axis;
       req["position_mm"] = pos;
+    } else if (cmd == "switches") {
+      if (!sw_block_delete.empty()) req["block_delete"] = sw_block_delete == "on";
+      if (!sw_optional_stop.empty()) req["optional_stop"] = sw_optional_stop == "on";
     } else if (cmd == "override") {
       if (!pct_feed && !pct_rapid && !pct_spindle) {
         std::cerr << "contourctl override: give FEED%, --rapid % or --spindle %\n";

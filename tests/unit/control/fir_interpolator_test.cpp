@@ -286,3 +286,53 @@ TEST(Interpolator, FeedOverrideZeroLetsTheRapidRunAndHoldsTheFeedMove) {
   // At the rapid's end (10, 0, 0): the path braked in time to stand at the feed move's start.
   EXPECT_LT((out.position_mm - Vector3d(10, 0, 0)).norm(), 0.01) << out.position_mm.transpose();
 }
+
+// The optional stop switch is live (LinuxCNC): judged when the path reaches the M1.
+TEST(Interpolator, OptionalStopSwitchIsJudgedWhenThePathReachesTheM1) {
+  auto plan_with_m1 = [] {
+    PlannerParams pp;
+    BlendPlanner pl(pp, Vector3d::Zero());
+    Block a;
+    a.line = 1;
+    a.feed_mm_min = 1500;
+    a.blend = BlendMode::kExactStop;
+    a.seg = PathSegment::line(Vector3d::Zero(), Vector3d(5, 0, 0));
+    pl.push(a);
+    Block m1;
+    m1.kind = BlockKind::kOptionalStop;
+    m1.line = 2;
+    pl.push(m1);
+    Block b = a;
+    b.line = 3;
+    b.seg = PathSegment::line(Vector3d(5, 0, 0), Vector3d(5, 5, 0));
+    pl.push(b);
+    Block e;
+    e.kind = BlockKind::kEnd;
+    pl.push(e);
+    std::vector<PlannedSegment> out;
+    PlannedSegment s;
+    while (pl.pop(s)) out.push_back(s);
+    return out;
+  };
+  for (const bool on : {false, true}) {
+    Interpolator ip;
+    InterpolatorParams p;
+    p.optional_stop = !on;  // configured the other way; the switch flips it before the M1
+    ip.configure(p, Vector3d::Zero());
+    for (const auto& s : plan_with_m1()) ASSERT_TRUE(ip.push(s));
+    InterpOutput out;
+    ip.step(1.0, out);
+    ip.set_optional_stop(on);
+    bool held = false;
+    for (int k = 0; k < 20000 && out.status != InterpStatus::kDone; ++k) {
+      ip.step(1.0, out);
+      if (out.status == InterpStatus::kHolding) {
+        held = true;
+        EXPECT_LT((out.position_mm - Vector3d(5, 0, 0)).norm(), 1e-9);
+        ip.resume();
+      }
+    }
+    EXPECT_EQ(held, on) << "switch " << on;
+    EXPECT_EQ(out.status, InterpStatus::kDone);
+  }
+}

@@ -238,3 +238,22 @@ TEST(Gcode, RandomBytesNeverCrash) {
   EXPECT_GT(errors, 0);
   EXPECT_GT(ok + errors, 2999);
 }
+
+// The block delete switch is live (LinuxCNC): flipped between lines, it applies from the next line.
+TEST(Gcode, BlockDeleteSwitchAppliesFromTheNextLine) {
+  GcodeParser p(plain(), "bd.ngc");
+  std::vector<Block> out;
+  p.parse_line("G21 G90 F600", out);
+  p.parse_line("/G1 X5", out);  // switch off: runs
+  p.set_block_delete(true);
+  p.parse_line("/G1 X9", out);  // switch on: skipped
+  p.parse_line("G1 Y3", out);
+  p.set_block_delete(false);
+  p.parse_line("/G1 X1", out);
+  const auto m = motions(out);
+  ASSERT_EQ(m.size(), 3u) << m.size() << " moves, first to line " << (m.empty() ? 0 : m[0].line);
+  EXPECT_DOUBLE_EQ(m[0].seg.end.x(), 5.0);
+  EXPECT_DOUBLE_EQ(m[1].seg.end.x(), 5.0);
+  EXPECT_DOUBLE_EQ(m[1].seg.end.y(), 3.0);
+  EXPECT_DOUBLE_EQ(m[2].seg.end.x(), 1.0);
+}
