@@ -45,19 +45,11 @@ std::vector<SegmentKind> end_and_load(BlendPlanner& pl, Interpolator& ip) {
   return kinds;
 }
 
-std::vector<PlannedSegment> plan_square(BlendMode mode) {
+// Plans blocks (a kEnd appended) from the origin and returns every planned segment.
+std::vector<PlannedSegment> plan_blocks(const std::vector<Block>& blocks) {
   PlannerParams pp;
   BlendPlanner pl(pp, Vector3d::Zero());
-  const Vector3d pts[] = {{0, 0, 0}, {10, 0, 0}, {10, 10, 0}, {0, 10, 0}, {0, 0, 1}};
-  for (int i = 1; i < 5; ++i) {
-    Block b;
-    b.line = i;
-    b.feed_mm_min = 1500;
-    b.blend = mode;
-    b.tolerance_mm = 0.02;
-    b.seg = PathSegment::line(pts[i - 1], pts[i]);
-    pl.push(b);
-  }
+  for (const auto& b : blocks) pl.push(b);
   Block e;
   e.kind = BlockKind::kEnd;
   pl.push(e);
@@ -65,6 +57,21 @@ std::vector<PlannedSegment> plan_square(BlendMode mode) {
   PlannedSegment s;
   while (pl.pop(s)) out.push_back(s);
   return out;
+}
+
+std::vector<PlannedSegment> plan_square(BlendMode mode) {
+  const Vector3d pts[] = {{0, 0, 0}, {10, 0, 0}, {10, 10, 0}, {0, 10, 0}, {0, 0, 1}};
+  std::vector<Block> blocks;
+  for (int i = 1; i < 5; ++i) {
+    Block b;
+    b.line = i;
+    b.feed_mm_min = 1500;
+    b.blend = mode;
+    b.tolerance_mm = 0.02;
+    b.seg = PathSegment::line(pts[i - 1], pts[i]);
+    blocks.push_back(b);
+  }
+  return plan_blocks(blocks);
 }
 }  // namespace
 
@@ -217,27 +224,20 @@ TEST(Interpolator, FeedMoveAfterASpindleChangeWaitsAtAnExactStopWithTheNewSpeedO
 namespace {
 // G1 X10 / G0 Y50 / G1 X0 as planned segments (exact stops between them: G61).
 std::vector<PlannedSegment> plan_feed_rapid_feed(bool rapid_first = false) {
-  PlannerParams pp;
-  BlendPlanner pl(pp, Vector3d::Zero());
-  std::vector<Vector3d> pts = {{0, 0, 0}, {10, 0, 0}, {10, 50, 0}, {0, 50, 0}};
-  std::vector<bool> rapid = {false, true, false};
-  if (rapid_first) rapid = {true, false, false};
-  for (int i = 1; i < 4; ++i) {
+  const std::vector<Vector3d> pts = {{0, 0, 0}, {10, 0, 0}, {10, 50, 0}, {0, 50, 0}};
+  const std::vector<bool> rapid =
+      rapid_first ? std::vector<bool>{true, false, false} : std::vector<bool>{false, true, false};
+  std::vector<Block> blocks;
+  for (std::size_t i = 1; i < 4; ++i) {
     Block b;
-    b.line = i;
-    b.rapid = rapid[static_cast<std::size_t>(i - 1)];
+    b.line = static_cast<int>(i);
+    b.rapid = rapid[i - 1];
     b.feed_mm_min = b.rapid ? 6000 : 1500;
     b.blend = BlendMode::kExactStop;
-    b.seg = PathSegment::line(pts[static_cast<std::size_t>(i - 1)], pts[static_cast<std::size_t>(i)]);
-    pl.push(b);
+    b.seg = PathSegment::line(pts[i - 1], pts[i]);
+    blocks.push_back(b);
   }
-  Block e;
-  e.kind = BlockKind::kEnd;
-  pl.push(e);
-  std::vector<PlannedSegment> out;
-  PlannedSegment s;
-  while (pl.pop(s)) out.push_back(s);
-  return out;
+  return plan_blocks(blocks);
 }
 }  // namespace
 
@@ -290,29 +290,18 @@ TEST(Interpolator, FeedOverrideZeroLetsTheRapidRunAndHoldsTheFeedMove) {
 // The optional stop switch is live (LinuxCNC): judged when the path reaches the M1.
 TEST(Interpolator, OptionalStopSwitchIsJudgedWhenThePathReachesTheM1) {
   auto plan_with_m1 = [] {
-    PlannerParams pp;
-    BlendPlanner pl(pp, Vector3d::Zero());
     Block a;
     a.line = 1;
     a.feed_mm_min = 1500;
     a.blend = BlendMode::kExactStop;
     a.seg = PathSegment::line(Vector3d::Zero(), Vector3d(5, 0, 0));
-    pl.push(a);
     Block m1;
     m1.kind = BlockKind::kOptionalStop;
     m1.line = 2;
-    pl.push(m1);
     Block b = a;
     b.line = 3;
     b.seg = PathSegment::line(Vector3d(5, 0, 0), Vector3d(5, 5, 0));
-    pl.push(b);
-    Block e;
-    e.kind = BlockKind::kEnd;
-    pl.push(e);
-    std::vector<PlannedSegment> out;
-    PlannedSegment s;
-    while (pl.pop(s)) out.push_back(s);
-    return out;
+    return plan_blocks({a, m1, b});
   };
   for (const bool on : {false, true}) {
     Interpolator ip;
