@@ -72,7 +72,7 @@ RefPoint ProgramSource::step(const Inputs& in, ProgramStep& out) noexcept {
   // HOLD and stop decelerate along the path: the interpolator ramps its override to 0.
   const bool moving = in.running && !stopping_;
   job_->interp.set_optional_stop(in.optional_stop);
-  spindle_override_ = std::isfinite(in.spindle_override) ? std::max(0.0, in.spindle_override) : 1.0;
+  spindle_override_ = in.spindle_override;  // clamped to its live range by the loop's command stage
   const InterpStatus ist = job_->interp.step(moving ? in.override_ratio : 0.0,
                                              moving ? in.rapid_override_ratio : 0.0, iout_);
   out.status = ist;

@@ -683,13 +683,12 @@ void ServoLoop::cycle() noexcept {
   const RefPoint r = reference(st, servo);
   identify_step(st);
   v_ref_ = (ref_ - ref_prev_) / period_s_;  // control, following error, a stop's start
-  double eps_norm = 0.0;
-  AxisCommands out = control_step(r, st, servo, v_ref_, eps_norm);
-  eps_norm_ = eps_norm;
+  eps_norm_ = 0.0;
+  AxisCommands out = control_step(r, st, servo, v_ref_, eps_norm_);
   channels(st, out);
   write(out);
   last_servo_ = servo;
-  supervise(st, servo, v_ref_, eps_norm);
+  supervise(st, servo, v_ref_, eps_norm_);
   publish_cycle();
   ++cycle_;
 }
