@@ -77,6 +77,9 @@ void Interpolator::configure(const InterpolatorParams& p, const Eigen::Vector3d&
   holding_ = resumed_hold_ = done_ = false;
   rapid_now_ = false;
   next_start_ = brake_for_ = -1;
+  on_line_ = 0;
+  next_new_line_ = sb_braking_ = sb_stopped_ = sb_go_ = false;
+  sb_pass_ = sb_for_ = -1;
   next_rapid_ = false;
   last_ = InterpOutput{};
   last_.position_mm = start_mm;
@@ -109,6 +112,7 @@ bool Interpolator::push(const PlannedSegment& seg) noexcept {
 
 void Interpolator::resume() noexcept {
   if (holding_) resumed_hold_ = true;
+  if (sb_stopped_) sb_go_ = true;
 }
 
 Eigen::Vector3d Interpolator::position_at(std::int64_t t, double* progress_mm,
@@ -183,6 +187,31 @@ InterpStatus Interpolator::step(double feed_ratio, double rapid_ratio, InterpOut
       target = r_next;
     }
   }
+  if (sb_stopped_) {
+    if (!sb_go_) {
+      ovr_ = 0.0;
+      last_.status = InterpStatus::kHolding;
+      out = last_;
+      return out.status;
+    }
+    // Released: the next line starts (the override ramps up from 0 as after a feed hold).
+    sb_stopped_ = sb_go_ = sb_braking_ = false;
+    // The line braked for starts now; a stand that came too late (inside that line) releases
+    // nothing: the path runs to the end of the line it stands in and stops again.
+    sb_pass_ = next_start_ == sb_for_ ? sb_for_ : -1;
+    last_.single_block_stop = false;
+  }
+  if (p_.single_block && !sb_braking_ && next_new_line_ && next_start_ != sb_pass_) {
+    // Stand before the next line: brake when the plan time left before it starts is what the
+    // ramp from the present ratio to 0 consumes (plus a cycle), as for a slower next segment.
+    const double r_rate = 1.0 / std::max(1, fir_.length() - 1);
+    if (static_cast<double>(next_start_) - tau_ <= ovr_ * ovr_ / (2.0 * r_rate) + ovr_) {
+      sb_braking_ = true;
+      sb_for_ = next_start_;
+      sb_line_ = on_line_;
+    }
+  }
+  if (sb_braking_) target = 0.0;
   if (holding_) {
     if (!resumed_hold_) {
       ovr_ = 0.0;
@@ -199,6 +228,13 @@ InterpStatus Interpolator::step(double feed_ratio, double rapid_ratio, InterpOut
   // Spread override changes over at least t_A (rate limit 1/(L-1) per period).
   const double rate = 1.0 / std::max(1, fir_.length() - 1);
   ovr_ += std::clamp(target - ovr_, -rate, rate);
+  if (sb_braking_) {
+    // The ramp to the single-block stand ends up to a cycle short of it: creep the rest at the
+    // smallest ramp step, so that the stand is exactly where the next line would start (with
+    // exact stop: the block's end point).
+    const double left = static_cast<double>(sb_for_) - tau_;
+    if (left > 1e-9 && ovr_ < rate) ovr_ = std::min(rate, left);
+  }
 
   // Horizon: the first marker, else where the last queued block stops (starvation stop).
   double limit = tau_;
@@ -262,6 +298,15 @@ InterpStatus Interpolator::step(double feed_ratio, double rapid_ratio, InterpOut
     q += frac * (q1 - q);
     prog0 += frac * (prog1 - prog0);
   }
+  if (sb_braking_ && ovr_ <= 0.0 && st == InterpStatus::kRunning) {
+    st = InterpStatus::kHolding;  // the single-block stand (no marker: hold_kind stays kMotion)
+    sb_stopped_ = true;
+    last_.single_block_stop = true;
+    // Standing exactly where the next line starts counts that segment as begun (its start is
+    // not after the plan time) though it has not moved: the line is the one braked in, unless
+    // the stand came late (inside the next line).
+    if (tau_ <= static_cast<double>(sb_for_) + 1e-9) ln = sb_line_;
+  }
   if (st == InterpStatus::kHolding || st == InterpStatus::kSpindleWait) {
     drop_finished(t0);
     if (count_ > 0) {
@@ -300,8 +345,12 @@ InterpStatus Interpolator::step(double feed_ratio, double rapid_ratio, InterpOut
     last_.flood = s.flood;
     last_.tool = s.tool;
   }
-  if (on != nullptr) rapid_now_ = on->rapid;
+  if (on != nullptr) {
+    rapid_now_ = on->rapid;
+    on_line_ = on->line;
+  }
   next_start_ = next_seg != nullptr ? next_seg->start_cycle : -1;
+  next_new_line_ = next_seg != nullptr && next_seg->line != on_line_;
   next_rapid_ = next_seg != nullptr && next_seg->rapid;
   last_.rapid = rapid_now_;
   last_.position_mm = q;

@@ -120,6 +120,8 @@ struct InterpOutput {
   InterpStatus status = InterpStatus::kIdle;
   // The segment the path is on is a rapid (G0): the rapid override applies, not the feed override.
   bool rapid = false;
+  // kHolding at a single-block stop (not at a marker): the path stands before the next line.
+  bool single_block_stop = false;
 };
 
 struct InterpolatorParams {
@@ -128,6 +130,7 @@ struct InterpolatorParams {
   double period_s = 0.001;
   double override_max = 1.5;
   bool optional_stop = false;  // M1 holds when true
+  bool single_block = false;   // stop before every new source line (see set_single_block)
   std::size_t capacity = 4096;  // segment ring size (> blocks in motion at once)
 };
 
@@ -161,6 +164,18 @@ class Interpolator {
   void resume() noexcept;
   // The optional stop switch (M1 holds when on), live: judged when the path reaches an M1.
   void set_optional_stop(bool on) noexcept { p_.optional_stop = on; }
+  // Single block (LinuxCNC's step, a commercial control's SBK), live: when on, the path brakes
+  // along itself (the override ramp, as a feed hold) to stand before the first segment of the
+  // next source line starts, and holds there (InterpStatus::kHolding, single_block_stop) until
+  // resume(); the segments of one line (an arc's chords) never stop between them. With exact stop
+  // (G61) the stand is the block's end point; with blending it is where the next line's command
+  // would start, on the path already verified. If the switch comes on too late to stand before
+  // the next line, the path stands as soon as the ramp allows (inside that line) and runs to the
+  // end of it after resume(). Switching off releases a brake that has not reached standstill.
+  void set_single_block(bool on) noexcept {
+    p_.single_block = on;
+    if (!on && !sb_stopped_) sb_braking_ = false;
+  }
 
   // Reference point at an integer plan time using the queued segments (RT-safe, no state change).
   [[nodiscard]] Eigen::Vector3d position_at(std::int64_t t, double* progress_mm = nullptr,
@@ -202,6 +217,17 @@ class Interpolator {
   std::int64_t next_start_ = -1;
   bool next_rapid_ = false;
   std::int64_t brake_for_ = -1;
+  // Single block: the line the path is on and the next segment's line (when it starts a new
+  // line); braking for the stop, standing at it, released by resume(); sb_pass_ = start of the
+  // segment released (it does not brake again).
+  int on_line_ = 0;
+  bool next_new_line_ = false;
+  bool sb_braking_ = false;
+  bool sb_stopped_ = false;
+  bool sb_go_ = false;
+  std::int64_t sb_pass_ = -1;
+  std::int64_t sb_for_ = -1;  // start of the segment the brake stands before
+  int sb_line_ = 0;           // the line the brake began in
   InterpOutput last_{};
 };
 

@@ -250,11 +250,14 @@ std::vector<CommandSpec> build_table() {
        "{period_s, v_cmd_mm_s, position_mm}}"});
   add({CommandId::kSwitches, "switches",
        "the operator's program switches, as in LinuxCNC: block delete ('/' lines skipped, from the "
-       "next line the interpreter reads) and optional stop (M1 holds, judged when the path reaches "
-       "it); no argument: get",
+       "next line the interpreter reads), optional stop (M1 holds, judged when the path reaches "
+       "it) and single block (the path stops before each new line; resume runs the next one); no "
+       "argument: get",
        {typed("block_delete", ArgType::kBool, false, "true or false", "the block delete switch"),
-        typed("optional_stop", ArgType::kBool, false, "true or false", "the optional stop switch")},
-       kAnyState, false, false, "any", "{block_delete, optional_stop}: as they are from the next cycle"});
+        typed("optional_stop", ArgType::kBool, false, "true or false", "the optional stop switch"),
+        typed("single_block", ArgType::kBool, false, "true or false", "the single block switch")},
+       kAnyState, false, false, "any",
+       "{block_delete, optional_stop, single_block}: as they are from the next cycle"});
   add({CommandId::kShutdown, "shutdown", "controlled stop, drives disabled, exit 0", {}, kAnyState,
        false, false, "any", "{shutting_down}"});
   return t;

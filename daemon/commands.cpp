@@ -131,7 +131,10 @@ json Daemon::status_json() {
          {"rapid_override", st.rapid_override},
          {"spindle_override", st.spindle_override},
          {"on_rapid", st.on_rapid},
-         {"switches", {{"block_delete", planner_->block_delete()}, {"optional_stop", st.optional_stop}}},
+         {"switches",
+          {{"block_delete", planner_->block_delete()},
+           {"optional_stop", st.optional_stop},
+           {"single_block", st.single_block}}},
          {"job", st.attached_job},
          {"loaded_job", loaded_job_},
          {"finished_job", st.finished_job},
@@ -224,7 +227,7 @@ json Daemon::status_json() {
     const std::string msg = planner_->message(st.attached_job, st.hold_message_id);
     const ProgramPlanner::HoldSite at = planner_->message_site(st.attached_job, st.hold_message_id);
     const int line = at.line != 0 ? at.line : st.hold_line;
-    j["hold"] = {{"line", line}, {"message", msg}};
+    j["hold"] = {{"line", line}, {"message", st.hold_single_block ? std::string("single block") : msg}};
     if (msg.rfind("manual tool change", 0) == 0) {
       j["tool_change"] = {{"tool", at.line != 0 ? at.tool : st.hold_tool}, {"line", line},
                           {"message", msg}};
@@ -990,7 +993,16 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
           throw CommandError("command queue full; retry");
         }
       }
-      return {{"block_delete", planner_->block_delete()}, {"optional_stop", optional_stop}};
+      bool single_block = loop_->status().single_block;
+      if (req.contains("single_block")) {
+        single_block = req.at("single_block").get<bool>();
+        if (!loop_->post({CommandKind::kSetSingleBlock, 0, single_block ? 1.0 : 0.0, 0.0})) {
+          throw CommandError("command queue full; retry");
+        }
+      }
+      return {{"block_delete", planner_->block_delete()},
+              {"optional_stop", optional_stop},
+              {"single_block", single_block}};
     }
     case CommandId::kIdentify: {
       json r = identify_on_loop(*loop_, cfg_, axis_index(req.at("axis"), cfg_.machine),

@@ -79,6 +79,7 @@ std::string_view to_string(CommandKind k) noexcept {
     case CommandKind::kJogBrake: return "jog brake (dead-man)";
     case CommandKind::kHome: return "home";
     case CommandKind::kSetOptionalStop: return "optional stop switch";
+    case CommandKind::kSetSingleBlock: return "single block switch";
   }
   return "?";
 }

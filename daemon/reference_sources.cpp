@@ -72,6 +72,7 @@ RefPoint ProgramSource::step(const Inputs& in, ProgramStep& out) noexcept {
   // HOLD and stop decelerate along the path: the interpolator ramps its override to 0.
   const bool moving = in.running && !stopping_;
   job_->interp.set_optional_stop(in.optional_stop);
+  job_->interp.set_single_block(in.single_block);
   spindle_override_ = in.spindle_override;  // clamped to its live range by the loop's command stage
   const InterpStatus ist = job_->interp.step(moving ? in.override_ratio : 0.0,
                                              moving ? in.rapid_override_ratio : 0.0, iout_);
@@ -97,7 +98,8 @@ RefPoint ProgramSource::step(const Inputs& in, ProgramStep& out) noexcept {
     stopping_ = true;
     out.planner_failed = true;
   }
-  if (ist == InterpStatus::kHolding && in.running) out.program_hold = true;  // M0/M1/M6
+  // M0/M1/M6, a single-block stop
+  if (ist == InterpStatus::kHolding && in.running) out.program_hold = true;
 
   // A feed move after a spindle start / speed change (the planner's kSpindleSync marker): the
   // path waits at its exact stop while the marker's speed is commanded until the spindle is at

@@ -49,6 +49,7 @@ class ProgramSource {
     double rapid_override_ratio = 1.0;  // rapids (G0): the rapid override alone
     double spindle_override = 1.0;      // scales the programmed spindle speed (S)
     bool optional_stop = false;         // the M1 switch
+    bool single_block = false;          // stop before each new line
     bool wait_for_spindle = false;  // a spindle is present and at_speed_wait asks for the wait
     bool spindle_at_speed = false;  // the spindle channel's judgement (previous cycle)
     double spindle_target_rpm = 0.0;  // the spindle channel's clamped target (previous cycle)

@@ -489,6 +489,9 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
     case CommandKind::kSetOptionalStop:
       optional_stop_ = c.a != 0.0;
       break;
+    case CommandKind::kSetSingleBlock:
+      single_block_ = c.a != 0.0;
+      break;
     case CommandKind::kSetOverride: {
       const double v = std::isfinite(c.a) ? c.a : 0.0;
       if (c.axis == kOverrideRapid) {
@@ -823,6 +826,7 @@ void ServoLoop::program_step(MachineState st, RefPoint& r) noexcept {
   in.rapid_override_ratio = rapid_override_;  // no cutting on a rapid: neither feed nor force
   in.spindle_override = spindle_override_;
   in.optional_stop = optional_stop_;
+  in.single_block = single_block_;
   using Wait = config::SpindleConfig::Wait;
   const Wait policy = cfg_.spindle.at_speed_wait;
   in.wait_for_spindle = spindle_.present() && (policy == Wait::kAlways ||
@@ -1180,6 +1184,7 @@ void ServoLoop::publish() noexcept {
   pub_.spindle_override = spindle_override_;
   pub_.on_rapid = io.rapid;
   pub_.optional_stop = optional_stop_;
+  pub_.single_block = single_block_;
   pub_.attached_job = program_.attached() ? program_.job()->id : 0;
   pub_.finished_job = finished_job_;
   pub_.finished_ok = finished_ok_;
@@ -1208,6 +1213,7 @@ void ServoLoop::publish() noexcept {
                         io.hold_kind != control::SegmentKind::kUserMcode &&
                         !(io.hold_kind == control::SegmentKind::kToolChange && plc_ != nullptr &&
                           plc_->handles_tool_change());
+  pub_.hold_single_block = pub_.interp_holding && io.single_block_stop;
   pub_.hold_line = pub_.interp_holding ? io.line : 0;
   pub_.hold_tool = pub_.interp_holding ? io.tool : 0;
   pub_.hold_message_id = pub_.interp_holding ? io.message_id : -1;

@@ -71,6 +71,7 @@ enum class CommandKind : std::uint8_t {
   kJogBrake,     // brake a jog at the axis' deceleration (continuous jog's dead-man); else nothing
   kHome,         // axis (-1: every axis with a homing method, in home.sequence order); READY
   kSetOptionalStop,  // a != 0: M1 holds (the optional stop switch), live
+  kSetSingleBlock,   // a != 0: the program stops before each new line (single block), live
 };
 
 // Drive identification (issue 16, `contourctl identify`): the loop plays a preallocated velocity
@@ -177,6 +178,7 @@ struct LoopStatus {
   double spindle_override = 1.0;  // ratio of the programmed spindle speed
   bool on_rapid = false;          // the path is on a rapid: override_applied follows rapid_override
   bool optional_stop = false;     // the M1 switch
+  bool single_block = false;      // the single-block switch
   std::uint64_t attached_job = 0;   // program the loop is executing (0 = none)
   std::uint64_t finished_job = 0;   // last program that ended (done, stopped or aborted)
   bool finished_ok = false;         // finished_job ran to its end
@@ -198,6 +200,7 @@ struct LoopStatus {
   std::uint8_t homing_failure = 0;    // of the last run: 0 none, else kHomingFailed's detail
   int homing_failure_axis = -1;
   bool interp_holding = false;      // M0/M1/M6 hold in the program
+  bool hold_single_block = false;   // while interp_holding: a single-block stop, not a marker
   int hold_line = 0;                // while interp_holding: the hold's source line,
   int hold_tool = 0;                // the tool after it (M6: the tool to load),
   int hold_message_id = -1;         // and its message (ProgramPlanner::message)
@@ -457,6 +460,7 @@ class ServoLoop {
   double rapid_override_ = 1.0;
   double spindle_override_ = 1.0;
   bool optional_stop_ = false;  // interpolator.optional_stop at start-up
+  bool single_block_ = false;   // off at start-up (LinuxCNC)
   bool recording_ = false;
   int fault_axis_ = -1;
   double fault_value_ = 0.0, fault_limit_ = 0.0;

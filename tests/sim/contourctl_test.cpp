@@ -501,11 +501,13 @@ TEST_F(ContourctlTest, RunFromLineStartsWithASafeApproach) {
 
 // Issue 18: the block delete and optional stop switches, settable at any time, in status.
 TEST_F(ContourctlTest, SwitchesSetAndShow) {
-  EXPECT_EQ(lines_of(ctl({"switches"}).out).back(), "switches: block delete off, optional stop off");
+  EXPECT_EQ(lines_of(ctl({"switches"}).out).back(),
+            "switches: block delete off, optional stop off, single block off");
   EXPECT_EQ(lines_of(ctl({"switches", "--block-delete", "on", "--optional-stop", "on"}).out).back(),
-            "switches: block delete on, optional stop on");
+            "switches: block delete on, optional stop on, single block off");
   const json st = last_json(ctl({"--json", "status"}));
-  EXPECT_EQ(st["switches"], json({{"block_delete", true}, {"optional_stop", true}})) << st.dump();
+  EXPECT_EQ(st["switches"], json({{"block_delete", true}, {"optional_stop", true}, {"single_block", false}}))
+      << st.dump();
   EXPECT_NE(ctl({"switches", "--optional-stop", "maybe"}).rc, 0);
   // With block delete on, a '/' line is not in the program.
   std::ofstream(dir_ / "bd.ngc") << "G21 G90\n/G1 X5 F600\nG1 X1 F600\nM2\n";
@@ -514,6 +516,48 @@ TEST_F(ContourctlTest, SwitchesSetAndShow) {
   ASSERT_EQ(ctl({"switches", "--block-delete", "off"}).rc, 0);
   const json off = last_json(ctl({"--json", "load", (dir_ / "bd.ngc").string()}));
   EXPECT_EQ(off.value("motion_blocks", -1), 2) << off.dump();
+}
+
+// Issue 18: single block. The program stops before each new line (HOLD, status hold.message
+// "single block" with the line just run); with exact stop (G61) it stands at the line's end
+// point; resume runs the next line; the program completes.
+TEST_F(ContourctlTest, SingleBlockStopsBeforeEachLineAndResumeRunsTheNext) {
+  std::ofstream(dir_ / "sb.ngc") << "G21 G90 G61\nG1 X5 F600\nG1 Y5\nG1 X0\nM2\n";
+  ASSERT_NE(lines_of(ctl({"switches", "--single-block", "on"}).out).back().find("single block on"),
+            std::string::npos);
+  ASSERT_EQ(ctl({"run", (dir_ / "sb.ngc").string()}).rc, 0);
+  std::vector<int> stops;
+  std::vector<std::pair<double, double>> stands;
+  json st;
+  std::string state;
+  for (int i = 0; i < 3000; ++i) {
+    st = last_json(ctl({"--json", "status"}));
+    state = st.value("state", "");
+    if (st.contains("hold") && st["hold"].value("message", "") == "single block") {
+      EXPECT_EQ(state, "HOLD") << st.dump();
+      stops.push_back(st["hold"].value("line", 0));
+      stands.emplace_back(st["ref_mm"][0].get<double>(), st["ref_mm"][1].get<double>());
+      ASSERT_EQ(ctl({"resume"}).rc, 0);
+      // Counted once: wait until it runs again (each line takes 0.5 s).
+      for (int j = 0; j < 500 && last_json(ctl({"--json", "status"})).value("state", "") == "HOLD"; ++j) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      }
+      continue;
+    }
+    if (state != "RUNNING" && state != "HOLD") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_EQ(ctl({"switches", "--single-block", "off"}).rc, 0);
+  EXPECT_EQ(state, "READY") << st.dump();
+  EXPECT_TRUE(st.value("finished_ok", false)) << st.dump();
+  EXPECT_EQ(stops, (std::vector<int>{2, 3})) << st.dump();  // after X5 and Y5; X0 runs to the M2
+  ASSERT_EQ(stands.size(), 2u);
+  EXPECT_NEAR(stands[0].first, 5.0, 1e-6);  // exact stop: at each line's end point
+  EXPECT_NEAR(stands[0].second, 0.0, 1e-6);
+  EXPECT_NEAR(stands[1].first, 5.0, 1e-6);
+  EXPECT_NEAR(stands[1].second, 5.0, 1e-6);
+  EXPECT_NEAR(st["ref_mm"][0].get<double>(), 0.0, 1e-6) << st.dump();
+  EXPECT_NEAR(st["ref_mm"][1].get<double>(), 5.0, 1e-6) << st.dump();
 }
 
 TEST_F(ContourctlTest, ShortConfirmationInsteadOfStatus) {

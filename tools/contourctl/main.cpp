@@ -223,8 +223,9 @@ std::string confirmation(const std::string& cmd, const json& r) {
     return b;
   }
   if (cmd == "switches" && r.contains("block_delete")) {
-    std::snprintf(b, sizeof b, "switches: block delete %s, optional stop %s",
-                  r.value("block_delete", false) ? "on" : "off", r.value("optional_stop", false) ? "on" : "off");
+    std::snprintf(b, sizeof b, "switches: block delete %s, optional stop %s, single block %s",
+                  r.value("block_delete", false) ? "on" : "off", r.value("optional_stop", false) ? "on" : "off",
+                  r.value("single_block", false) ? "on" : "off");
     return b;
   }
   if (cmd == "override" && r.contains("feed_override_percent")) {
@@ -619,12 +620,15 @@ int main(int argc, char** argv) {
   bool both = false, ccw_flag = false, cw_flag = false;
 
   app.add_subcommand("status", summary("status", "machine state"));
-  std::string sw_block_delete, sw_optional_stop;
-  auto* sw = app.add_subcommand("switches", summary("switches", "block delete and optional stop switches") +
-                                                " (switches [--block-delete on|off] [--optional-stop on|off])");
+  std::string sw_block_delete, sw_optional_stop, sw_single_block;
+  auto* sw = app.add_subcommand(
+      "switches", summary("switches", "block delete, optional stop and single block switches") +
+                      " (switches [--block-delete on|off] [--optional-stop on|off] [--single-block on|off])");
   sw->add_option("--block-delete", sw_block_delete, "on: lines starting with '/' are skipped")
       ->check(CLI::IsMember({"on", "off"}));
   sw->add_option("--optional-stop", sw_optional_stop, "on: M1 holds")->check(CLI::IsMember({"on", "off"}));
+  sw->add_option("--single-block", sw_single_block, "on: the program stops before each new line (resume runs it)")
+      ->check(CLI::IsMember({"on", "off"}));
   auto* load = app.add_subcommand("load", summary("load", "validate and plan a part program"));
   load->add_option("PROGRAM", program, "RS274/NGC file")->required();
   bool load_preview = false;
@@ -899,6 +903,7 @@ int main(int argc, char** argv) {
     } else if (cmd == "switches") {
       if (!sw_block_delete.empty()) req["block_delete"] = sw_block_delete == "on";
       if (!sw_optional_stop.empty()) req["optional_stop"] = sw_optional_stop == "on";
+      if (!sw_single_block.empty()) req["single_block"] = sw_single_block == "on";
     } else if (cmd == "override") {
       if (!pct_feed && !pct_rapid && !pct_spindle) {
         std::cerr << "contourctl override: give FEED%, --rapid % or --spindle %\n";

@@ -13,7 +13,11 @@
 // rapid vs feed, feed rates, dwells, tool changes, user M-codes, line numbers. A program LinuxCNC
 // rejects must be rejected by contourd on the same line.
 //
-// Usage: contour-gcode-diff [--var F.var] [--tbl F.tbl] [--subroutines DIR] [--verbose] PROGRAM...
+// Usage: contour-gcode-diff [--var F.var] [--tbl F.tbl] [--subroutines DIR] [--verbose] [--final]
+//        PROGRAM...
+// --final also prints, per program LinuxCNC accepts, where LinuxCNC's machine ends (the end of its
+// last move, machine coordinates, mm): `FINAL <program> <x> <y> <z>` (the end-to-end tests compare
+// the daemon's final machine position with it).
 // The .var/.tbl files are in mm (LinuxCNC formats); without them a built-in machine is used.
 // Exit: 0 all programs identical or rejected by both; 1 any mismatch; 2 usage; 77 LinuxCNC's
 // interpreter is not installed (tools/deps.d/linuxcnc.list), with the reason on stderr.
@@ -705,6 +709,7 @@ int main(int argc, char** argv) {
   std::string python = "/usr/bin/python3";
   std::string script = CONTOUR_GCODE_REF_SCRIPT;
   bool verbose = false;
+  bool final_position = false;
   std::vector<std::string> programs;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -722,9 +727,10 @@ int main(int argc, char** argv) {
     else if (a == "--python") python = next();
     else if (a == "--ref-script") script = next();
     else if (a == "--verbose" || a == "-v") verbose = true;
+    else if (a == "--final") final_position = true;
     else if (a == "--help" || a == "-h") {
       std::cout << "usage: contour-gcode-diff [--var F.var] [--tbl F.tbl] [--subroutines DIR] "
-                   "[--rs274 PATH] [--python PATH] [--ref-script PATH] [--verbose] PROGRAM...\n";
+                   "[--rs274 PATH] [--python PATH] [--ref-script PATH] [--verbose] [--final] PROGRAM...\n";
       return 0;
     } else if (!a.empty() && a[0] == '-') {
       std::cerr << "contour-gcode-diff: unknown option " << a << "\n";
@@ -849,6 +855,17 @@ int main(int argc, char** argv) {
     // user M-code handler for M100-M199 (rs274 has none). rs274, when it agrees, confirms the
     // verdict, gives the text of the failing line, and checks spindle, coolant and stops.
     const bool lcnc_rejected = mod.rejected;
+    if (final_position && !lcnc_rejected) {
+      const Ev* last = nullptr;
+      for (const auto& e : mod.events) {
+        if (e.kind == Ev::Kind::kTraverse || e.kind == Ev::Kind::kFeed || e.kind == Ev::Kind::kArc) last = &e;
+      }
+      if (last != nullptr) {
+        char b[256];
+        std::snprintf(b, sizeof b, "%.9f %.9f %.9f", last->end.x(), last->end.y(), last->end.z());
+        std::cout << "FINAL " << prog << " " << b << "\n";
+      }
+    }
     const bool rs_agrees = !user_m && rs.rejected == mod.rejected;
     if (!rs_agrees) {
       ++rs_differs;

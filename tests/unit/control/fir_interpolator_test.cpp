@@ -325,3 +325,136 @@ TEST(Interpolator, OptionalStopSwitchIsJudgedWhenThePathReachesTheM1) {
     EXPECT_EQ(out.status, InterpStatus::kDone);
   }
 }
+
+namespace {
+// The square of plan_square (4 lines) blended at 20 um, plus an arc line as its 5th line (planned
+// as several chords: one line, several segments).
+std::vector<PlannedSegment> plan_square_and_arc() {
+  const Vector3d pts[] = {{0, 0, 0}, {10, 0, 0}, {10, 10, 0}, {0, 10, 0}, {0, 0, 0}};
+  std::vector<Block> blocks;
+  for (int i = 1; i < 5; ++i) {
+    Block b;
+    b.line = i;
+    b.feed_mm_min = 1500;
+    b.blend = BlendMode::kLimited;
+    b.tolerance_mm = 0.02;
+    b.seg = PathSegment::line(pts[i - 1], pts[i]);
+    blocks.push_back(b);
+  }
+  Block arc = blocks.back();
+  arc.line = 5;
+  arc.seg.kind = PathSegment::Kind::kArc;  // G2 X0 Y10 J5: a half circle through (-5, 5)
+  arc.seg.start = Vector3d(0, 0, 0);
+  arc.seg.end = Vector3d(0, 10, 0);
+  arc.seg.center = Vector3d(0, 5, 0);
+  blocks.push_back(arc);
+  return plan_blocks(blocks);
+}
+
+// Distance from p to the polyline of the square's four sides and the arc's circle (the programmed
+// path; blended corners lie within the 20 um tolerance of it).
+double off_square_path(const Vector3d& p) {
+  const Vector3d pts[] = {{0, 0, 0}, {10, 0, 0}, {10, 10, 0}, {0, 10, 0}, {0, 0, 0}};
+  double d = std::abs((p - Vector3d(0, 5, 0)).norm() - 5.0) + std::abs(p.z());
+  for (int i = 1; i < 5; ++i) {
+    const Vector3d a = pts[i - 1], b = pts[i];
+    const double u = std::clamp((p - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
+    d = std::min(d, (p - (a + u * (b - a))).norm());
+  }
+  return d;
+}
+}  // namespace
+
+// Single block (LinuxCNC's step): the path stands before each new line, on the path, and resume
+// runs the next line; the chords of one line (the arc) never stop between them.
+TEST(Interpolator, SingleBlockStandsBeforeEachNewLineOnThePath) {
+  const auto segs = plan_square_and_arc();
+  std::size_t arc_segments = 0;
+  for (const auto& s : segs) arc_segments += s.kind == SegmentKind::kMotion && s.line == 5 ? 1 : 0;
+  ASSERT_GT(arc_segments, 1u);
+  Interpolator ip;
+  ip.configure(InterpolatorParams{}, Vector3d::Zero());
+  for (const auto& s : segs) ASSERT_TRUE(ip.push(s));
+  ip.set_single_block(true);
+  InterpOutput out;
+  std::vector<int> stop_lines;
+  double worst_off = 0.0, prev_ovr = 1.0, max_step = 0.0;
+  int k = 0;
+  for (; k < 200000 && out.status != InterpStatus::kDone; ++k) {
+    ip.step(1.0, out);
+    worst_off = std::max(worst_off, off_square_path(out.position_mm));
+    max_step = std::max(max_step, std::abs(out.override_applied - prev_ovr));
+    prev_ovr = out.override_applied;
+    if (out.status == InterpStatus::kHolding) {
+      ASSERT_TRUE(out.single_block_stop);
+      EXPECT_EQ(out.hold_kind, SegmentKind::kMotion);
+      EXPECT_EQ(out.override_applied, 0.0);
+      stop_lines.push_back(out.line);
+      // It stands: more cycles do not move it.
+      const Vector3d p = out.position_mm;
+      for (int i = 0; i < 50; ++i) ip.step(1.0, out);
+      EXPECT_EQ(out.position_mm, p);
+      EXPECT_EQ(out.status, InterpStatus::kHolding);
+      ip.resume();
+    }
+  }
+  ASSERT_EQ(out.status, InterpStatus::kDone);
+  EXPECT_EQ(stop_lines, (std::vector<int>{1, 2, 3, 4}));  // before lines 2..5, never inside the arc
+  EXPECT_LT(worst_off, 0.02 + 1e-6);  // on the verified path throughout
+  EXPECT_LE(max_step, 1.0 / (InterpolatorParams{}.fir_taps - 1) + 1e-12);  // ramps, never a step
+  EXPECT_LT((out.position_mm - Vector3d(0, 10, 0)).norm(), 1e-9);
+  EXPECT_FALSE(out.single_block_stop);
+}
+
+// With exact stop (G61) the single-block stand is the block's end point; switching single block
+// off while standing does not move the path until resume, then it runs to the end without stops.
+TEST(Interpolator, SingleBlockWithExactStopStandsAtTheVertexAndSwitchesOffLive) {
+  Interpolator ip;
+  ip.configure(InterpolatorParams{}, Vector3d::Zero());
+  for (const auto& s : plan_square(BlendMode::kExactStop)) ASSERT_TRUE(ip.push(s));
+  ip.set_single_block(true);
+  InterpOutput out;
+  int k = 0;
+  while (ip.step(1.0, out) != InterpStatus::kHolding && k < 100000) ++k;
+  ASSERT_EQ(out.status, InterpStatus::kHolding);
+  EXPECT_LT((out.position_mm - Vector3d(10, 0, 0)).norm(), 1e-9) << out.position_mm.transpose();
+  ip.set_single_block(false);
+  for (int i = 0; i < 100; ++i) ip.step(1.0, out);
+  EXPECT_EQ(out.status, InterpStatus::kHolding);
+  ip.resume();
+  int holds = 0;
+  for (k = 0; k < 100000 && out.status != InterpStatus::kDone; ++k) {
+    ip.step(1.0, out);
+    holds += out.status == InterpStatus::kHolding ? 1 : 0;
+  }
+  EXPECT_EQ(holds, 0);
+  EXPECT_EQ(out.status, InterpStatus::kDone);
+}
+
+// Switched on too late to stand before the next line, the path stands inside it and, after
+// resume, runs to that line's end and stops there (no line runs past unseen).
+TEST(Interpolator, SingleBlockSwitchedOnLateStandsInsideTheLineAndStopsAtItsEnd) {
+  Interpolator ip;
+  ip.configure(InterpolatorParams{}, Vector3d::Zero());
+  for (const auto& s : plan_square(BlendMode::kExactStop)) ASSERT_TRUE(ip.push(s));
+  InterpOutput out;
+  // Run until line 2 (X10 Y0 -> X10 Y10) is in its last few cycles: less than the ramp from
+  // 100 % to 0 needs before line 3 starts.
+  int k = 0;
+  while (k < 100000 && !(out.line == 2 && out.position_mm.y() > 9.9)) {
+    ip.step(1.0, out);
+    ++k;
+  }
+  ASSERT_EQ(out.line, 2);
+  ip.set_single_block(true);
+  while (ip.step(1.0, out) != InterpStatus::kHolding && k < 200000) ++k;
+  ASSERT_TRUE(out.single_block_stop);
+  EXPECT_EQ(out.line, 3);  // inside line 3 (X10 Y10 -> X0 Y10)
+  EXPECT_LT(out.position_mm.x(), 10.0);
+  EXPECT_GT(out.position_mm.x(), 9.0);
+  EXPECT_NEAR(out.position_mm.y(), 10.0, 1e-9);
+  ip.resume();
+  while (ip.step(1.0, out) != InterpStatus::kHolding && k < 300000) ++k;
+  ASSERT_TRUE(out.single_block_stop);
+  EXPECT_LT((out.position_mm - Vector3d(0, 10, 0)).norm(), 1e-9) << out.position_mm.transpose();
+}
