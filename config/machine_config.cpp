@@ -39,7 +39,9 @@ void parse_home(Section& a, AxisConfig& ax) {
     const double range = ax.max_mm - ax.min_mm;
     c.search_distance_mm = h.number("search_distance_mm", 1.2 * range, 0.001, 1e6);
     c.home_position_mm = h.number("home_position_mm", c.home_offset_mm, ax.min_mm, ax.max_mm);
+    c.use_index = h.boolean("use_index", false);
   } else {
+    if (h.boolean("use_index", false)) h.error("use_index", "needs method switch (the index follows the switch)");
     // No motion: the axis is where its encoder says (absolute) or nowhere known (none).
     c.home_position_mm = c.home_offset_mm;
   }
@@ -88,6 +90,8 @@ MachineConfig parse_machine(Section& s, double period_s) {
         static_cast<int>(d.integer("delay_cycles", 1, 0, control::FeedDrive::kMaxDelay));
     ax.drive.period_s = m.period_s;
     ax.sim_power_up_mm = d.number("power_up_mm", 0.0, -1e6, 1e6);
+    ax.sim_index_pitch_mm = d.number("index_pitch_mm", 0.0, 0.0, 1e6);
+    ax.sim_index_phase_mm = d.number("index_phase_mm", 0.0, -1e6, 1e6);
     d.finish();
     Section idf = a.child("identified");
     if (idf.present()) {

@@ -41,6 +41,9 @@ struct HomeConfig {
   int sequence = 0;
   double search_distance_mm = 0.0;  // the switch must close within this travel (default 1.2 x range)
   double unhomed_jog_mm_s = 10.0;   // jog speed limit while not homed (no soft limits then)
+  // LinuxCNC's HOME_USE_INDEX (method switch): after the switch edge the axis goes on at the
+  // latch speed to the encoder's next index pulse, whose position becomes home_offset_mm.
+  bool use_index = false;
 };
 
 struct AxisConfig {
@@ -58,6 +61,11 @@ struct AxisConfig {
   // Simulated machine only: the true position at power-up (the incremental encoder reads 0
   // there), so that homing has something to find.
   double sim_power_up_mm = 0.0;
+  // Simulated machine only: the motor encoder's index, one pulse per sim_index_pitch_mm of true
+  // travel at sim_index_phase_mm + k * pitch (machine.axes[].sim.index_pitch_mm, index_phase_mm;
+  // 0 = no index).
+  double sim_index_pitch_mm = 0.0;
+  double sim_index_phase_mm = 0.0;
 };
 
 struct MachineConfig {

@@ -41,6 +41,14 @@ struct AxisFeedback {
   bool digital_inputs_present = false;
   bool digital_inputs_fresh = false;
   std::uint32_t digital_inputs = 0;
+  // Encoder index latch (homing with home.use_index, LinuxCNC's index-enable): `index_present`:
+  // this bus can latch the index of this axis' encoder. While AxisCommands::index_arm is set the
+  // drive watches for the next index pulse; `index_latched` then says it came and
+  // `index_position_mm` is the encoder position at the pulse (the bus' position coordinates,
+  // exact to the count: the drive latches it, not the cycle's sample). Disarming clears it.
+  bool index_present = false;
+  bool index_latched = false;
+  double index_position_mm = 0.0;
 };
 
 // The spindle drive on the same bus (CANopen bus.spindle, or the simulated machine's spindle).
@@ -72,6 +80,8 @@ struct AxisCommands {
   // axes that map no outputs.
   std::array<std::uint32_t, kMaxAxes> digital_outputs{};
   std::array<std::uint32_t, kMaxAxes> digital_output_mask{};
+  // Arm the encoder index latch of the axis (AxisFeedback::index_latched); false disarms it.
+  std::array<bool, kMaxAxes> index_arm{};
 };
 
 class AxisBus {

@@ -214,6 +214,7 @@ const char* to_string(HomingSource::Phase p) noexcept {
     case HomingSource::Phase::kFinal: return "final_move";
     case HomingSource::Phase::kDone: return "done";
     case HomingSource::Phase::kBraking: return "braking";
+    case HomingSource::Phase::kIndex: return "index";
   }
   return "?";
 }
@@ -224,6 +225,10 @@ const char* homing_failure_text(std::uint8_t code) noexcept {
     case 2: return "the home switch did not close within search_distance_mm";
     case 3: return "the home switch did not open again within search_distance_mm";
     case 4: return "the home switch did not close again on the latch approach";
+    case 6:
+      return "home.use_index, but this bus cannot latch the axis' encoder index (the CANopen master "
+             "does not map the touch probe 0x60B8-0x60BA; simulated machine: sim.index_pitch_mm)";
+    case 7: return "no encoder index within search_distance_mm after the home switch";
     default: return "aborted (stop, or the machine left READY) before every axis latched";
   }
 }
@@ -333,6 +338,8 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
       case Phase::kSearch:
         if (!ax.digital_inputs_present) {
           fail(i, 1, 0.0);
+        } else if (p.use_index && !ax.index_present) {
+          fail(i, 6, 0.0);
         } else if (edge_ok && sw) {
           phase_[a] = Phase::kBrakeSearch;
         } else if (travelled > p.search_distance_mm) {
@@ -351,12 +358,20 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
         // Away from the switch at the latch speed; the release edge is the latch for an
         // opposite-sign latch_vel.
         if (edge_ok && !sw) {
-          if (release_latch) latch_mm_[a] = fb.act_mm[i];
-          phase_[a] = Phase::kBrakeBackoff;
+          if (release_latch && p.use_index) {
+            // On at the same speed to the encoder's next index.
+            phase_[a] = Phase::kIndex;
+            index_v_[a] = -search_dir * std::abs(p.latch_mm_s);
+            start_mm_[a] = pos_mm_[i];
+          } else {
+            if (release_latch) latch_mm_[a] = fb.act_mm[i];
+            phase_[a] = Phase::kBrakeBackoff;
+          }
         } else if (travelled > p.search_distance_mm) {
           fail(i, 3, travelled);
         }
-        ramp(a, phase_[a] == Phase::kBackoff ? -search_dir * std::abs(p.latch_mm_s) : 0.0, acc, period_s);
+        ramp(a, phase_[a] == Phase::kBackoff || phase_[a] == Phase::kIndex ? -search_dir * std::abs(p.latch_mm_s) : 0.0,
+             acc, period_s);
         break;
       }
       case Phase::kBrakeBackoff:
@@ -367,13 +382,28 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
         }
         break;
       case Phase::kApproach:
-        if (edge_ok && sw) {
+        if (edge_ok && sw && p.use_index) {
+          phase_[a] = Phase::kIndex;
+          index_v_[a] = p.latch_mm_s;
+          start_mm_[a] = pos_mm_[i];
+        } else if (edge_ok && sw) {
           latch_mm_[a] = fb.act_mm[i];
           phase_[a] = Phase::kBrakeLatch;
         } else if (travelled > p.search_distance_mm) {
           fail(i, 4, travelled);
         }
-        ramp(a, phase_[a] == Phase::kApproach ? p.latch_mm_s : 0.0, acc, period_s);
+        ramp(a, phase_[a] == Phase::kApproach || phase_[a] == Phase::kIndex ? p.latch_mm_s : 0.0, acc, period_s);
+        break;
+      case Phase::kIndex:
+        // The drive latched the index (armed since the switch edge): its position, exact to the
+        // count, in the loop's coordinates (act - bus position is the present home shift).
+        if (ax.index_latched) {
+          latch_mm_[a] = ax.index_position_mm + (fb.act_mm[i] - ax.position_mm);
+          phase_[a] = Phase::kBrakeLatch;
+        } else if (travelled > p.search_distance_mm) {
+          fail(i, 7, travelled);
+        }
+        ramp(a, phase_[a] == Phase::kIndex ? index_v_[a] : 0.0, acc, period_s);
         break;
       case Phase::kBrakeLatch:
         ramp(a, 0.0, acc, period_s);

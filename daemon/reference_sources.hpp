@@ -159,6 +159,7 @@ class HomingSource {
   enum class Phase : std::uint8_t {
     kIdle, kSearch, kBrakeSearch, kBackoff, kBrakeBackoff, kApproach, kBrakeLatch, kLatched,
     kFinal, kDone, kBraking /* abort or failure */,
+    kIndex /* past the switch edge at the latch speed, waiting for the encoder index */,
   };
   struct AxisPlan {
     bool home = false;  // this axis is homed by this run
@@ -168,6 +169,7 @@ class HomingSource {
     double offset_mm = 0.0;
     double position_mm = 0.0;
     double search_distance_mm = 0.0;
+    bool use_index = false;  // home.use_index: the index after the switch edge is the latch
   };
   static constexpr std::uint32_t kHomeSwitchBit = 1u << 2;  // CiA 402 0x60FD bit 2
 
@@ -192,6 +194,10 @@ class HomingSource {
   [[nodiscard]] std::uint8_t failure_code() const noexcept { return failure_code_; }
   [[nodiscard]] double failure_value() const noexcept { return failure_value_; }
   [[nodiscard]] Phase phase(int axis) const noexcept { return phase_[static_cast<std::size_t>(axis)]; }
+  // The encoder index latch of the axis must be armed (AxisCommands::index_arm) this cycle.
+  [[nodiscard]] bool index_armed(int axis) const noexcept {
+    return active_ && phase_[static_cast<std::size_t>(axis)] == Phase::kIndex;
+  }
   // Axes that finished (moved to home_position_mm) since start(); the loop marks them homed at the shift.
   [[nodiscard]] std::uint32_t homing_mask() const noexcept { return homing_mask_; }
 
@@ -206,6 +212,7 @@ class HomingSource {
   std::array<double, kMaxAxes> v_{};
   std::array<double, kMaxAxes> start_mm_{};  // where the current phase began (distance bound)
   std::array<double, kMaxAxes> latch_mm_{};
+  std::array<double, kMaxAxes> index_v_{};  // kIndex: the speed the switch edge was met at
   Eigen::Vector3d pos_mm_ = Eigen::Vector3d::Zero();
   int axes_ = 0;
   int group_ = -1;                 // current sequence number
@@ -220,7 +227,9 @@ class HomingSource {
 const char* to_string(HomingSource::Phase p) noexcept;
 // Why homing ended without homing (the log, status.homing.failure): 1 no digital inputs, 2 the
 // switch did not close within search_distance_mm, 3 did not open again, 4 did not close again on
-// the latch approach, anything else aborted (the loop's code 5: stop, or the machine left READY).
+// the latch approach, 6 home.use_index on a bus that cannot latch the index, 7 no index within
+// search_distance_mm after the switch edge, anything else aborted (the loop's code 5: stop, or
+// the machine left READY).
 const char* homing_failure_text(std::uint8_t code) noexcept;
 
 // Standstill. Servoing (READY): the reference stays at the position given to start(). Not

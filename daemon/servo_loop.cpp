@@ -463,7 +463,7 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
         const config::HomeConfig& h = cfg_.machine.axes[a].home;
         if (h.method != config::HomeConfig::Method::kSwitch || (c.axis >= 0 && c.axis != i)) continue;
         plan[a] = {true, h.sequence, h.search_vel_mm_s, h.latch_vel_mm_s, h.home_offset_mm,
-                   h.home_position_mm, h.search_distance_mm};
+                   h.home_position_mm, h.search_distance_mm, h.use_index};
         any = true;
       }
       if (!any) {
@@ -1063,6 +1063,7 @@ void ServoLoop::channels(MachineState st, AxisCommands& out) noexcept {
 
 void ServoLoop::write(const AxisCommands& out) noexcept {
   out_ = out;
+  for (int i = 0; i < axes_; ++i) out_.index_arm[static_cast<std::size_t>(i)] = homing_.index_armed(i);
   // The PLC's CiA 402 outputs (0x60FE:01), computed in this cycle's scan, written with the
   // commands: the field sees the scan's end value only.
   if (plc_ != nullptr) {

@@ -45,6 +45,14 @@ void SimBus::add_input_switch(int axis, int bit, double threshold_mm, bool on_ab
 
 void SimBus::clear_input_switches() noexcept { switch_count_.fill(0); }
 
+void SimBus::set_encoder_index(int axis, double pitch_mm, double phase_mm) {
+  if (axis < 0 || axis >= axes_) throw std::invalid_argument("SimBus: no such axis");
+  if (!(pitch_mm >= 0.0) || !std::isfinite(phase_mm)) throw std::invalid_argument("SimBus: index pitch >= 0");
+  const auto a = static_cast<std::size_t>(axis);
+  index_pitch_mm_[a] = pitch_mm;
+  index_phase_mm_[a] = phase_mm;
+}
+
 void SimBus::begin_cycle() noexcept {
   // SYNC: the drives act on the command latched at the previous SYNC for one period, then latch
   // the newest one.
@@ -110,6 +118,28 @@ void SimBus::read(BusFeedback& fb) noexcept {
       di_last_[a] = di;
     }
     f.digital_inputs = di_last_[a];
+    // Encoder index: a pulse between the previous true position and this one is latched at its
+    // exact position (in the reported coordinates; counts with CANopen quantisation).
+    f.index_present = index_pitch_mm_[a] > 0.0;
+    const double x_true = drive_[a].position_mm();
+    if (f.index_present && index_armed_[a] && !index_latched_[a] && x_true != index_prev_mm_[a]) {
+      const double p = index_pitch_mm_[a];
+      const double lo = std::min(x_true, index_prev_mm_[a]);
+      const double hi = std::max(x_true, index_prev_mm_[a]);
+      // The first pulse position above lo (moving up) or below hi (moving down).
+      const bool up = x_true > index_prev_mm_[a];
+      const double k = up ? std::floor((lo - index_phase_mm_[a]) / p) + 1.0
+                          : std::ceil((hi - index_phase_mm_[a]) / p) - 1.0;
+      const double at = index_phase_mm_[a] + k * p;
+      if (at > lo && at < hi) {
+        index_latched_[a] = true;
+        const double rel = at - encoder_zero_mm_[a];
+        index_at_mm_[a] = can_cpm_[a] > 0.0 ? static_cast<double>(std::llround(rel * can_cpm_[a])) / can_cpm_[a] : rel;
+      }
+    }
+    index_prev_mm_[a] = x_true;
+    f.index_latched = index_latched_[a];
+    f.index_position_mm = index_at_mm_[a];
     f.fault = fault_[a];
     f.enabled = mode_ == DriveMode::kEnabled && !f.fault && !disabled_[a];
     f.statusword = f.fault ? 0x0008 : (f.enabled ? 0x0027 : 0x0040);
@@ -130,6 +160,8 @@ void SimBus::write(const AxisCommands& cmd) noexcept {
                                              can_cpm_[a]
                                        : cmd.velocity_mm_s[a];
     do_received_[a] = cmd.digital_outputs[a] & cmd.digital_output_mask[a];
+    index_armed_[a] = cmd.index_arm[a];
+    if (!index_armed_[a]) index_latched_[a] = false;
   }
   received_mode_ = cmd.mode;
   spindle_received_rpm_ = std::isfinite(cmd.spindle_rpm) ? cmd.spindle_rpm : 0.0;
@@ -148,6 +180,7 @@ void SimBus::power_up_at(int axis, double true_mm) {
   const auto a = static_cast<std::size_t>(axis);
   drive_[a].reset(true_mm);
   encoder_zero_mm_[a] = true_mm;
+  index_prev_mm_[a] = true_mm;
 }
 
 std::string SimBus::describe() const {
@@ -210,6 +243,8 @@ void configure_sim_machine(SimBus& bus, const config::Config& cfg) {
     if (cfg.machine.axes[a].sim_power_up_mm != 0.0) {
       bus.power_up_at(static_cast<int>(a), cfg.machine.axes[a].sim_power_up_mm);
     }
+    bus.set_encoder_index(static_cast<int>(a), cfg.machine.axes[a].sim_index_pitch_mm,
+                          cfg.machine.axes[a].sim_index_phase_mm);
   }
 }
 

@@ -70,6 +70,10 @@ class SimBus final : public AxisBus {
     return drive_[static_cast<std::size_t>(axis)].position_mm();
   }
   void clear_input_switches() noexcept;
+  // Encoder index (setup-time only): one pulse per `pitch_mm` of true travel, at true positions
+  // phase_mm + k * pitch_mm (a rotary encoder on the motor of a ball screw); pitch 0 = none.
+  // Latched exactly (to the count with CANopen quantisation) while AxisCommands::index_arm.
+  void set_encoder_index(int axis, double pitch_mm, double phase_mm);
   // Thread-safe override of input bits (tests, fault injection): bits in `mask` read as `values`.
   void inject_digital_inputs(int axis, std::uint32_t mask, std::uint32_t values) noexcept {
     di_force_mask_[static_cast<std::size_t>(axis)] = mask;
@@ -85,6 +89,12 @@ class SimBus final : public AxisBus {
 
  private:
   int axes_ = 0;
+  std::array<double, kMaxAxes> index_pitch_mm_{};
+  std::array<double, kMaxAxes> index_phase_mm_{};
+  std::array<bool, kMaxAxes> index_armed_{};
+  std::array<bool, kMaxAxes> index_latched_{};
+  std::array<double, kMaxAxes> index_at_mm_{};   // reported position at the pulse
+  std::array<double, kMaxAxes> index_prev_mm_{};  // true position at the previous read
   std::array<control::FeedDrive, kMaxAxes> drive_{};
   std::array<double, kMaxAxes> latched_v_{};   // command the drives act on
   std::array<double, kMaxAxes> received_v_{};  // last command written (latched at next SYNC)

@@ -85,3 +85,22 @@ TEST(HomeConfig, TheSimulatedPowerUpPositionIsASimKey) {
 }
 
 }  // namespace
+
+// LinuxCNC's HOME_USE_INDEX as home.use_index (method switch only); the simulated encoder's index
+// pitch and phase are sim keys.
+TEST(HomeConfig, UseIndexIsASwitchOptionAndTheSimulatedIndexIsASimKey) {
+  const std::string with_index =
+      "      home: {method: switch, search_vel_mm_min: -1200, latch_vel_mm_min: 60, use_index: true}\n"
+      "      sim: {index_pitch_mm: 5, index_phase_mm: 0.25}\n";
+  const auto cfg = load_config_string(machine(with_index, "  allow_unhomed: true\n"));
+  EXPECT_TRUE(cfg.machine.axes[0].home.use_index);
+  EXPECT_DOUBLE_EQ(cfg.machine.axes[0].sim_index_pitch_mm, 5.0);
+  EXPECT_DOUBLE_EQ(cfg.machine.axes[0].sim_index_phase_mm, 0.25);
+  EXPECT_FALSE(load_config_string(machine(kSwitch, "  allow_unhomed: true\n")).machine.axes[0].home.use_index);
+  const auto e = config_errors(
+      machine("      home: {method: absolute, use_index: true}\n", "  allow_unhomed: true\n"));
+  EXPECT_TRUE(any_contains(e, "use_index")) << (e.empty() ? "" : e[0]);
+  EXPECT_TRUE(any_contains(e, "needs method switch"));
+  EXPECT_TRUE(any_contains(config_errors(machine("      sim: {index_pitch_mm: -1}\n", "  allow_unhomed: true\n")),
+                           "index_pitch_mm"));
+}

@@ -41,7 +41,7 @@ struct IdealAxes {
 };
 
 HomingSource::AxisPlan plan(int sequence, double search, double latch, double offset, double position) {
-  return {true, sequence, search, latch, offset, position, 100.0};
+  return {true, sequence, search, latch, offset, position, 100.0, false};
 }
 
 struct HomingRun {
@@ -345,6 +345,87 @@ TEST(HomingLoop, StopAbortsHomingAndTheAxesStayUnhomed) {
   EXPECT_EQ(rig.loop.status().homed_mask, 0u);
   EXPECT_EQ(rig.loop.status().homing_failure, 5);
   EXPECT_EQ(rig.loop.status().state, MachineState::kReady);
+}
+
+}  // namespace
+}  // namespace contour::daemon
+
+namespace contour::daemon {
+namespace {
+
+// home.use_index on a bus that cannot latch the index: homing fails at once (code 6), unmoved.
+TEST(HomingSource, UseIndexWithoutAnIndexLatchFailsAtOnce) {
+  HomingSource h;
+  std::array<HomingSource::AxisPlan, kMaxAxes> p{};
+  p[0] = plan(0, -50.0, 1.0, -100.0, -90.0);
+  p[0].use_index = true;
+  IdealAxes ax;  // digital inputs, no index
+  h.start(p, 3, Eigen::Vector3d::Zero());
+  const HomingRun r = run(h, ax, Eigen::Vector3d::Zero());
+  EXPECT_TRUE(h.failed());
+  EXPECT_EQ(h.failure_code(), 6);
+  EXPECT_FALSE(r.shifted);
+  EXPECT_LT(r.max_speed, 0.1);
+  EXPECT_NE(std::string(homing_failure_text(6)).find("index"), std::string::npos);
+}
+
+// Index homing on the simulated machine (LinuxCNC's HOME_USE_INDEX): X searches its switch,
+// backs off at a latch speed ten times sim.yaml's (10 mm/s: a switch latch would be ~10 um off)
+// and goes on to the encoder's next index pulse (every 5 mm of true travel, at 0.25 + 5k mm):
+// the first one past the switch's release point (-199.5) is at -194.75 true, which
+// home_offset_mm names, so the machine position is the true position to the count, from any
+// power-up position.
+TEST(HomingLoop, IndexHomingIsExactToTheCountFromAnyPowerUpPosition) {
+  for (const double power_up : {-150.0, -37.3}) {
+    config::Config cfg = homing_config();
+    cfg.machine.axes[0].sim_power_up_mm = power_up;
+    auto& x = cfg.machine.axes[0];
+    x.home.use_index = true;
+    x.home.latch_vel_mm_s = 10.0;
+    x.home.home_offset_mm = -194.75;
+    x.sim_index_pitch_mm = 5.0;
+    x.sim_index_phase_mm = 0.25;
+    test_rig::Rig rig{cfg};
+    configure_sim_machine(rig.bus, cfg);
+    ASSERT_TRUE(rig.enable());
+    rig.loop.post({CommandKind::kHome, 0});
+    rig.step(3);
+    ASSERT_TRUE(rig.loop.status().homing);
+    bool saw_index_phase = false;
+    for (int n = 0; n < 200000 && rig.loop.status().homing; ++n) {
+      rig.step(1);
+      saw_index_phase = saw_index_phase || rig.loop.status().home_phase[0] ==
+                                               static_cast<std::uint8_t>(HomingSource::Phase::kIndex);
+    }
+    ASSERT_FALSE(rig.loop.status().homing) << "homing did not end";
+    EXPECT_TRUE(saw_index_phase);
+    EXPECT_EQ(rig.loop.status().homing_failure, 0);
+    EXPECT_EQ(rig.loop.status().homed_mask & 1u, 1u);
+    rig.step(1000);
+    // Exact to the encoder's resolution (BLU 0.5 um), not to the latch speed's step (10 um).
+    EXPECT_NEAR(rig.loop.status().act_mm[0], rig.bus.true_position_mm(0), 0.0006) << power_up;
+    EXPECT_NEAR(rig.loop.status().ref_mm[0], 0.0, 1e-9);
+  }
+}
+
+// The index must come: none within search_distance_mm after the switch edge fails the homing
+// (code 7) and the axis stays unhomed.
+TEST(HomingLoop, NoIndexWithinTheSearchDistanceFailsTheHoming) {
+  config::Config cfg = homing_config();
+  auto& x = cfg.machine.axes[0];
+  x.home.use_index = true;
+  x.home.search_distance_mm = 100.0;  // (the power-up at -150 finds the switch within 50 mm)
+  x.sim_index_pitch_mm = 1000.0;       // next index past the switch: true 0, 199.5 mm on
+  x.sim_index_phase_mm = 0.0;
+  test_rig::Rig rig{cfg};
+  configure_sim_machine(rig.bus, cfg);
+  ASSERT_TRUE(rig.enable());
+  rig.loop.post({CommandKind::kHome, 0});
+  rig.step(3);
+  for (int n = 0; n < 400000 && rig.loop.status().homing; n += 100) rig.step(100);
+  EXPECT_FALSE(rig.loop.status().homing);
+  EXPECT_EQ(rig.loop.status().homing_failure, 7);
+  EXPECT_EQ(rig.loop.status().homed_mask & 1u, 0u);
 }
 
 }  // namespace
