@@ -266,7 +266,7 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   const double v0 = std::min({pr.cap, pr.repair_cap, c.cap, c.repair_cap});
   // Neighbourhood within the largest half-span (v0 * rr / 2 on each side): per-axis direction
   // ranges and the turning of the other vertices, by distance from this vertex.
-  const double span_max = 0.5 * v0 * rr_;
+  const double span_max = v0 * rr_;
   std::vector<Nb>& nb = nb_;
   nb.clear();
   for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
@@ -282,9 +282,14 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     nb.push_back({d, k > id ? q.turn : 0.0, q.u, true});
   }
   (void)final;
-  // Per-axis acceleration cap at speed v: velocity change across the vertex within +-v rr / 2.
+  // Per-axis acceleration cap at speed v: velocity change across the vertex within +-v rr. The
+  // window rule compares command velocities L1 periods apart, i.e. up to v (L1 + 1) of path apart;
+  // every such pair straddles a vertex whose distance to the later point is 0 and to the earlier
+  // one <= v rr, so the pairs of +-v rr around each vertex cover them all. (+-v rr / 2, as first
+  // written, missed pairs across three short chords: cam_dense_random's chords 945/948 turned
+  // the window infeasible at 0.0667 mm/period and the repair crawled at 7e-10 mm/period.)
   auto acc_cap = [&](double v) {
-    const double s = 0.5 * v * rr_;
+    const double s = v * rr_;
     Vector3d mn_b = Vector3d::Constant(kInf), mx_b = Vector3d::Constant(-kInf);
     Vector3d mn_a = mn_b, mx_a = mx_b;
     for (const auto& n : nb) {
@@ -972,8 +977,20 @@ void LookaheadPlanner::plan(bool final) {
     if (fail.kind == Failure::Kind::kWindow) {
       ++stats_.accel_repairs;
       Chord& c = chord(std::clamp(fail.chord, chords_.front().id, next_id_ - 1));
-      c.repair_cap = std::min(c.repair_cap, std::min(c.cap, 0.7 * std::max(fail.cap, 1e-9)));
-      if (iter > 30) c.repair_cap = std::min(c.repair_cap, 0.25 * c.repair_cap);
+      // Never below the speed a stop is one fine step from (q0): a window that no speed above it
+      // satisfies at this chord is entered too fast, so the vertex at its start becomes an exact
+      // stop (the backward pass then brakes for it) when it is still ahead of the committed
+      // position. Without this floor a repair to 0.7 * 0 crawled forever (cam_dense_random).
+      const double q0 = std::isfinite(c.dv) ? c.dv / (kFine + 1.0) : 0.0;
+      double target = std::min(c.cap, 0.7 * fail.cap);
+      if (iter > 30) target = std::min(target, 0.25 * std::min(c.repair_cap, c.cap));
+      if (target < q0 && c.id > committed_.chord && c.id > chords_.front().id && !c.stop) {
+        c.stop = true;
+        c.decided = false;
+      } else {
+        // (Below q0 only late, when the chord is already entered; the fallback normally wins.)
+        c.repair_cap = std::min(c.repair_cap, std::max(target, iter > 30 ? 1e-3 * q0 : q0));
+      }
       // Corners next to it see the lower speed.
       for (std::int64_t k = c.id; k <= std::min(c.id + 1, next_id_ - 1); ++k)
         if (k > committed_.chord) chord(k).decided = false;
