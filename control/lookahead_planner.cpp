@@ -14,6 +14,7 @@ namespace {
 using Eigen::Vector3d;
 constexpr double kTiny = 1e-12;  // mm: positions closer than this are the same
 constexpr int kFine = 4;          // fine braking steps per window
+constexpr double kEpsMargin = 0.99;  // verification tolerance / programmed tolerance
 
 // Upper bound of max over [0,1] of min(d_a, d_b) on a chord, given both convex distance
 // functions at its two ends (each is below its chord interpolation).
@@ -171,7 +172,10 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
   c.tol = p_.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
                                                               : p_.default_tolerance_mm);
   // G64 without P blends without a tolerance; G61 stops at every vertex (nothing to verify).
-  c.eps = c.mode == BlendMode::kLimited ? c.tol - chord_err : kInf;
+  // Verified with the 1 % margin kTrue holds (overlap_planner.hpp): the meter found 50.19 um at
+  // a reversal of pcb2gcode-multivibrator-clockwise-back (P = 50 um) that this verification had
+  // passed at <= 50 um (a difference between the verification's output and the meter's).
+  c.eps = c.mode == BlendMode::kLimited ? kEpsMargin * (c.tol - chord_err) : kInf;
   c.spindle = b.spindle;
   c.rpm = b.spindle_rpm;
   c.mist = b.mist;
@@ -282,31 +286,27 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     nb.push_back({d, k > id ? q.turn : 0.0, q.u, true});
   }
   (void)final;
-  // Per-axis acceleration cap at speed v: velocity change across the vertex within +-v rr. The
-  // window rule compares command velocities L1 periods apart, i.e. up to v (L1 + 1) of path apart;
-  // every such pair straddles a vertex whose distance to the later point is 0 and to the earlier
-  // one <= v rr, so the pairs of +-v rr around each vertex cover them all. (+-v rr / 2, as first
-  // written, missed pairs across three short chords: cam_dense_random's chords 945/948 turned
-  // the window infeasible at 0.0667 mm/period and the repair crawled at 7e-10 mm/period.)
+  // Per-axis acceleration cap at speed v. The window rule compares command velocities L1 periods
+  // apart, i.e. up to W = v (L1 + 1) <= v rr of path apart. Every such pair (p1 before p2) straddles
+  // the vertex at the start of p2's chord, with p2's chord at distance 0 after it and p1's chord
+  // within W before it (and that vertex's cap covers both: its region is +-C rr). So each vertex
+  // checks its next chord against the chords within v rr before it, and its previous chord against
+  // the chords within v rr after it (one-sided). The first version (+-v rr / 2 on both sides)
+  // missed pairs across three short chords: cam_dense_random's chords 945/948 made the window
+  // infeasible at 0.0667 mm/period and the repair crawled at 7e-10 mm/period (12 GB of pulses);
+  // +-v rr on both sides is safe but counts pairs 2 W apart (trochoidal_chords 1.64x slower).
+  const Vector3d u_prev = pr.u, u_next = c.u;
   auto acc_cap = [&](double v) {
     const double s = v * rr_;
-    Vector3d mn_b = Vector3d::Constant(kInf), mx_b = Vector3d::Constant(-kInf);
-    Vector3d mn_a = mn_b, mx_a = mx_b;
+    Vector3d du = Vector3d::Zero();
     for (const auto& n : nb) {
       if (n.d > s && !(n.d == 0.0)) continue;
-      if (n.after) {
-        mn_a = mn_a.cwiseMin(n.u);
-        mx_a = mx_a.cwiseMax(n.u);
-      } else {
-        mn_b = mn_b.cwiseMin(n.u);
-        mx_b = mx_b.cwiseMax(n.u);
-      }
+      du = du.cwiseMax(n.after ? Vector3d((n.u - u_prev).cwiseAbs())
+                               : Vector3d((u_next - n.u).cwiseAbs()));
     }
     double cap = kInf;
-    for (int i = 0; i < 3; ++i) {
-      const double du = std::max(mx_a[i] - mn_b[i], mx_b[i] - mn_a[i]);
-      if (du > 1e-12) cap = std::min(cap, A_[i] / du);
-    }
+    for (int i = 0; i < 3; ++i)
+      if (du[i] > 1e-12) cap = std::min(cap, A_[i] / du[i]);
     return cap;
   };
   // The largest constant speed the window rule allows through the neighbourhood (the span, and
@@ -1049,7 +1049,14 @@ void LookaheadPlanner::barrier(SegmentKind kind, const std::string& msg, const B
     }
     out_.push_back(s);
   }
-  earliest_tau_ = static_cast<double>(t_stop + static_cast<std::int64_t>(
+  // After a hold marker the interpolator restarts its time scale from 0 and ramps it back to 1 at
+  // 1/(L - 1) per period (Interpolator::step, the override rate limit): plan time advances by
+  // k (k + 1) / (2 (L - 1)) in k periods, L / 2 until full speed. Motion planned inside that ramp
+  // is played time-warped, its acceleration raised by p' s'': 2875 mm/s^2 per period and 2150 over
+  // 10 ms on cam_post (limit 2000; the vertex error of multivibrator-back, 50.2 um, too). Motion
+  // after a marker therefore starts when the scale is back at 1 (ceil(L / 2) + 1 periods later).
+  const std::int64_t marker = kind != SegmentKind::kMotion ? (L_ + 1) / 2 + 1 : 0;
+  earliest_tau_ = static_cast<double>(t_stop + marker + static_cast<std::int64_t>(
                                                    std::ceil(extra_s / T_ - 1e-9)));
   // Everything before has stopped exactly on the last point: start afresh from rest.
   if (!chords_.empty()) {
