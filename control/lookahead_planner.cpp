@@ -984,12 +984,16 @@ void LookaheadPlanner::plan(bool final) {
       const double q0 = std::isfinite(c.dv) ? c.dv / (kFine + 1.0) : 0.0;
       double target = std::min(c.cap, 0.7 * fail.cap);
       if (iter > 30) target = std::min(target, 0.25 * std::min(c.repair_cap, c.cap));
-      if (target < q0 && c.id > committed_.chord && c.id > chords_.front().id && !c.stop) {
+      // Repeated failures at one place also end in a stop: speed caps that persist (repair_cap
+      // is never raised again) cost more than one stop (random_corners crawled to 1042 s).
+      if ((target < q0 || iter > 20) && c.id > committed_.chord && c.id > chords_.front().id &&
+          !c.stop) {
         c.stop = true;
         c.decided = false;
       } else {
-        // (Below q0 only late, when the chord is already entered; the fallback normally wins.)
-        c.repair_cap = std::min(c.repair_cap, std::max(target, iter > 30 ? 1e-3 * q0 : q0));
+        // Below q0 only without a verified continuation to fall back on (after a barrier).
+        c.repair_cap = std::min(c.repair_cap,
+                                std::max(target, iter > 30 && !have_fallback_ ? 1e-3 * q0 : q0));
       }
       // Corners next to it see the lower speed.
       for (std::int64_t k = c.id; k <= std::min(c.id + 1, next_id_ - 1); ++k)
