@@ -15,6 +15,12 @@ using Eigen::Vector3d;
 constexpr double kTiny = 1e-12;  // mm: positions closer than this are the same
 constexpr int kFine = 4;          // fine braking steps per window
 constexpr double kEpsMargin = 0.99;  // verification tolerance / programmed tolerance
+// Collinear merging: a programmed vertex may be merged over when it lies within this share of P
+// of the merged chord; chords are merged while one of the two is shorter than kMergeShortPeriods
+// periods at its feed; at most kMergeMax vertices per chord.
+constexpr double kMergeShare = 0.04;
+constexpr double kMergeShortPeriods = 2.0;
+constexpr std::size_t kMergeMax = 256;
 
 // Upper bound of max over [0,1] of min(d_a, d_b) on a chord, given both convex distance
 // functions at its two ends (each is below its chord interpolation).
@@ -159,6 +165,7 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
     ++stats_.dropped_zero_length;
     return;
   }
+  if (chord_err == 0.0 && try_merge(b, e)) return;
   Chord c;
   c.id = next_id_++;
   c.a = a;
@@ -181,32 +188,13 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
   c.mist = b.mist;
   c.flood = b.flood;
   c.tool = b.tool;
-  double f = b.feed_mm_min;
-  if (b.rapid) f = std::min(f, p_.rapid_mm_min);
-  for (int i = 0; i < 3; ++i) {
-    const double ui = std::abs(c.u[i]);
-    if (ui > 1e-12) f = std::min(f, p_.max_velocity_mm_min[i] / ui);
-  }
-  if (!(f > 0.0)) f = 1e-6;
-  c.feed_mm_min = f;
-  const double v = f / 60.0 * T_;
-  // A move of more than ~31 years at its feed is not a real program (e.g. Y1e65 or a vanishing
-  // feed); refuse it before times overflow (fuzz regression-1).
-  if (!(len / v < 1e12)) {
-    throw std::invalid_argument("line " + std::to_string(b.line) + ": move of " +
-                                std::to_string(len) + " mm at " + std::to_string(f) +
-                                " mm/min is too long to interpolate");
-  }
-  c.cap = std::min(v, len / p_.min_segment_cycles);
-  c.dv = kInf;
-  for (int i = 0; i < 3; ++i) {
-    const double ui = std::abs(c.u[i]);
-    if (ui > 1e-12) c.dv = std::min(c.dv, A_[i] / ui);
-  }
+  c.block_feed_mm_min = b.feed_mm_min;
+  set_limits(c, b.line);
   if (!chords_.empty() && !start_from_rest_) {
     const Chord& pr = chords_.back();
     const double cth = std::clamp(pr.u.dot(c.u), -1.0, 1.0);
     c.turn = std::acos(cth);
+    c.has_prev = true;
     if (pr.mode == BlendMode::kExactStop || force_stop_next_) c.stop = true;
   }
   start_from_rest_ = false;
@@ -218,6 +206,84 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
   ++stats_.moves;
   chords_.push_back(c);
   stats_.max_window = std::max(stats_.max_window, chords_.size());
+}
+
+void LookaheadPlanner::set_limits(Chord& c, int line) {
+  double f = c.block_feed_mm_min;
+  if (c.rapid) f = std::min(f, p_.rapid_mm_min);
+  for (int i = 0; i < 3; ++i) {
+    const double ui = std::abs(c.u[i]);
+    if (ui > 1e-12) f = std::min(f, p_.max_velocity_mm_min[i] / ui);
+  }
+  if (!(f > 0.0)) f = 1e-6;
+  c.feed_mm_min = f;
+  const double v = f / 60.0 * T_;
+  // A move of more than ~31 years at its feed is not a real program (e.g. Y1e65 or a vanishing
+  // feed); refuse it before times overflow (fuzz regression-1).
+  if (!(c.len / v < 1e12)) {
+    throw std::invalid_argument("line " + std::to_string(line) + ": move of " +
+                                std::to_string(c.len) + " mm at " + std::to_string(f) +
+                                " mm/min is too long to interpolate");
+  }
+  c.cap = std::min(v, c.len / p_.min_segment_cycles);
+  c.dv = kInf;
+  for (int i = 0; i < 3; ++i) {
+    const double ui = std::abs(c.u[i]);
+    if (ui > 1e-12) c.dv = std::min(c.dv, A_[i] / ui);
+  }
+}
+
+// Why: the segment-duration floor (len / min_segment_cycles) held the CAM output of pcb2gcode
+// (alternating 1 um and 8 um chords) at 60 mm/min: D1MiniGSR-front took 13x LinuxCNC's time.
+// LinuxCNC merges such chords (G64 Q); here the merge error is counted inside P: a merged chord is
+// verified against eps - kMergeShare P, and every programmed vertex merged over lies within
+// kMergeShare P of it, so the output stays within eps of the programmed path and its vertices
+// (a continuous output within e of a segment, running from one end to the other, passes within e
+// of every point of it).
+bool LookaheadPlanner::try_merge(const Block& b, const Vector3d& e) {
+  if (chords_.empty() || start_from_rest_ || force_stop_next_) return false;
+  Chord& pr = chords_.back();
+  const BlendMode mode = p_.force_mode.value_or(b.blend);
+  if (pr.decided || pr.stop || pr.id <= committed_.chord || mode != BlendMode::kLimited ||
+      pr.mode != BlendMode::kLimited || pr.rapid != b.rapid || pr.block_feed_mm_min != b.feed_mm_min ||
+      pr.spindle != b.spindle || pr.rpm != b.spindle_rpm || pr.mist != b.mist ||
+      pr.flood != b.flood || pr.tool != b.tool || pr.dropped.size() >= kMergeMax)
+    return false;
+  const double tol = p_.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
+                                                                          : p_.default_tolerance_mm);
+  if (tol != pr.tol || !std::isfinite(pr.eps)) return false;
+  for (const auto& q : fallback_)
+    if (q.chord >= pr.id) return false;
+  for (const auto& q : vcommitted_.tail)
+    if (q.chord >= pr.id) return false;
+  const double short_mm = kMergeShortPeriods * pr.feed_mm_min / 60.0 * T_;
+  const double len_new = (e - pr.b).norm();
+  if (pr.len > short_mm && len_new > short_mm) return false;
+  const Vector3d d = e - pr.a;
+  const double len = d.norm();
+  if (len < 1e-9) return false;
+  const double dmax = kMergeShare * tol;
+  if (distance_point_segment(pr.b, pr.a, e) > dmax) return false;
+  for (const auto& q : pr.dropped)
+    if (distance_point_segment(q, pr.a, e) > dmax) return false;
+  // Merge.
+  pr.dropped.push_back(pr.b);
+  if (pr.dropped.size() == 1) pr.eps = kEpsMargin * pr.tol - dmax;
+  pr.b = e;
+  pr.u = d / len;
+  pr.len = len;
+  pr.line = b.line;
+  set_limits(pr, b.line);
+  if (pr.has_prev && chords_.size() >= 2) {
+    const Chord& pp = chords_[chords_.size() - 2];
+    pr.turn = std::acos(std::clamp(pp.u.dot(pr.u), -1.0, 1.0));
+  }
+  vmax_seen_ = std::max(vmax_seen_, pr.cap);
+  dvmin_seen_ = std::min(dvmin_seen_, pr.dv);
+  dvmax_seen_ = std::max(dvmax_seen_, pr.dv);
+  path_mm_ = pr.s0 + len;
+  ++stats_.moves;
+  return true;
 }
 
 // ------------------------------------------------------------------------------------------------
