@@ -14,6 +14,13 @@ namespace {
 using Eigen::Vector3d;
 constexpr double kTiny = 1e-12;  // mm: positions closer than this are the same
 constexpr int kFine = 4;          // fine braking steps per window
+constexpr double kEpsMargin = 0.99;  // verification tolerance / programmed tolerance
+// Collinear merging: a programmed vertex may be merged over when it lies within this share of P
+// of the merged chord; chords are merged while one of the two is shorter than kMergeShortPeriods
+// periods at its feed; at most kMergeMax vertices per chord.
+constexpr double kMergeShare = 0.04;
+constexpr double kMergeShortPeriods = 2.0;
+constexpr std::size_t kMergeMax = 256;
 
 // Upper bound of max over [0,1] of min(d_a, d_b) on a chord, given both convex distance
 // functions at its two ends (each is below its chord interpolation).
@@ -158,6 +165,7 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
     ++stats_.dropped_zero_length;
     return;
   }
+  if (chord_err == 0.0 && try_merge(b, e)) return;
   Chord c;
   c.id = next_id_++;
   c.a = a;
@@ -171,38 +179,22 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
   c.tol = p_.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
                                                               : p_.default_tolerance_mm);
   // G64 without P blends without a tolerance; G61 stops at every vertex (nothing to verify).
-  c.eps = c.mode == BlendMode::kLimited ? c.tol - chord_err : kInf;
+  // Verified with the 1 % margin kTrue holds (overlap_planner.hpp): the meter found 50.19 um at
+  // a reversal of pcb2gcode-multivibrator-clockwise-back (P = 50 um) that this verification had
+  // passed at <= 50 um (a difference between the verification's output and the meter's).
+  c.eps = c.mode == BlendMode::kLimited ? kEpsMargin * (c.tol - chord_err) : kInf;
   c.spindle = b.spindle;
   c.rpm = b.spindle_rpm;
   c.mist = b.mist;
   c.flood = b.flood;
   c.tool = b.tool;
-  double f = b.feed_mm_min;
-  if (b.rapid) f = std::min(f, p_.rapid_mm_min);
-  for (int i = 0; i < 3; ++i) {
-    const double ui = std::abs(c.u[i]);
-    if (ui > 1e-12) f = std::min(f, p_.max_velocity_mm_min[i] / ui);
-  }
-  if (!(f > 0.0)) f = 1e-6;
-  c.feed_mm_min = f;
-  const double v = f / 60.0 * T_;
-  // A move of more than ~31 years at its feed is not a real program (e.g. Y1e65 or a vanishing
-  // feed); refuse it before times overflow (fuzz regression-1).
-  if (!(len / v < 1e12)) {
-    throw std::invalid_argument("line " + std::to_string(b.line) + ": move of " +
-                                std::to_string(len) + " mm at " + std::to_string(f) +
-                                " mm/min is too long to interpolate");
-  }
-  c.cap = std::min(v, len / p_.min_segment_cycles);
-  c.dv = kInf;
-  for (int i = 0; i < 3; ++i) {
-    const double ui = std::abs(c.u[i]);
-    if (ui > 1e-12) c.dv = std::min(c.dv, A_[i] / ui);
-  }
+  c.block_feed_mm_min = b.feed_mm_min;
+  set_limits(c, b.line);
   if (!chords_.empty() && !start_from_rest_) {
     const Chord& pr = chords_.back();
     const double cth = std::clamp(pr.u.dot(c.u), -1.0, 1.0);
     c.turn = std::acos(cth);
+    c.has_prev = true;
     if (pr.mode == BlendMode::kExactStop || force_stop_next_) c.stop = true;
   }
   start_from_rest_ = false;
@@ -214,6 +206,84 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
   ++stats_.moves;
   chords_.push_back(c);
   stats_.max_window = std::max(stats_.max_window, chords_.size());
+}
+
+void LookaheadPlanner::set_limits(Chord& c, int line) {
+  double f = c.block_feed_mm_min;
+  if (c.rapid) f = std::min(f, p_.rapid_mm_min);
+  for (int i = 0; i < 3; ++i) {
+    const double ui = std::abs(c.u[i]);
+    if (ui > 1e-12) f = std::min(f, p_.max_velocity_mm_min[i] / ui);
+  }
+  if (!(f > 0.0)) f = 1e-6;
+  c.feed_mm_min = f;
+  const double v = f / 60.0 * T_;
+  // A move of more than ~31 years at its feed is not a real program (e.g. Y1e65 or a vanishing
+  // feed); refuse it before times overflow (fuzz regression-1).
+  if (!(c.len / v < 1e12)) {
+    throw std::invalid_argument("line " + std::to_string(line) + ": move of " +
+                                std::to_string(c.len) + " mm at " + std::to_string(f) +
+                                " mm/min is too long to interpolate");
+  }
+  c.cap = std::min(v, c.len / p_.min_segment_cycles);
+  c.dv = kInf;
+  for (int i = 0; i < 3; ++i) {
+    const double ui = std::abs(c.u[i]);
+    if (ui > 1e-12) c.dv = std::min(c.dv, A_[i] / ui);
+  }
+}
+
+// Why: the segment-duration floor (len / min_segment_cycles) held the CAM output of pcb2gcode
+// (alternating 1 um and 8 um chords) at 60 mm/min: D1MiniGSR-front took 13x LinuxCNC's time.
+// LinuxCNC merges such chords (G64 Q); here the merge error is counted inside P: a merged chord is
+// verified against eps - kMergeShare P, and every programmed vertex merged over lies within
+// kMergeShare P of it, so the output stays within eps of the programmed path and its vertices
+// (a continuous output within e of a segment, running from one end to the other, passes within e
+// of every point of it).
+bool LookaheadPlanner::try_merge(const Block& b, const Vector3d& e) {
+  if (chords_.empty() || start_from_rest_ || force_stop_next_) return false;
+  Chord& pr = chords_.back();
+  const BlendMode mode = p_.force_mode.value_or(b.blend);
+  if (pr.decided || pr.stop || pr.id <= committed_.chord || mode != BlendMode::kLimited ||
+      pr.mode != BlendMode::kLimited || pr.rapid != b.rapid || pr.block_feed_mm_min != b.feed_mm_min ||
+      pr.spindle != b.spindle || pr.rpm != b.spindle_rpm || pr.mist != b.mist ||
+      pr.flood != b.flood || pr.tool != b.tool || pr.dropped.size() >= kMergeMax)
+    return false;
+  const double tol = p_.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
+                                                                          : p_.default_tolerance_mm);
+  if (tol != pr.tol || !std::isfinite(pr.eps)) return false;
+  for (const auto& q : fallback_)
+    if (q.chord >= pr.id) return false;
+  for (const auto& q : vcommitted_.tail)
+    if (q.chord >= pr.id) return false;
+  const double short_mm = kMergeShortPeriods * pr.feed_mm_min / 60.0 * T_;
+  const double len_new = (e - pr.b).norm();
+  if (pr.len > short_mm && len_new > short_mm) return false;
+  const Vector3d d = e - pr.a;
+  const double len = d.norm();
+  if (len < 1e-9) return false;
+  const double dmax = kMergeShare * tol;
+  if (distance_point_segment(pr.b, pr.a, e) > dmax) return false;
+  for (const auto& q : pr.dropped)
+    if (distance_point_segment(q, pr.a, e) > dmax) return false;
+  // Merge.
+  pr.dropped.push_back(pr.b);
+  if (pr.dropped.size() == 1) pr.eps = kEpsMargin * pr.tol - dmax;
+  pr.b = e;
+  pr.u = d / len;
+  pr.len = len;
+  pr.line = b.line;
+  set_limits(pr, b.line);
+  if (pr.has_prev && chords_.size() >= 2) {
+    const Chord& pp = chords_[chords_.size() - 2];
+    pr.turn = std::acos(std::clamp(pp.u.dot(pr.u), -1.0, 1.0));
+  }
+  vmax_seen_ = std::max(vmax_seen_, pr.cap);
+  dvmin_seen_ = std::min(dvmin_seen_, pr.dv);
+  dvmax_seen_ = std::max(dvmax_seen_, pr.dv);
+  path_mm_ = pr.s0 + len;
+  ++stats_.moves;
+  return true;
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -266,7 +336,7 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   const double v0 = std::min({pr.cap, pr.repair_cap, c.cap, c.repair_cap});
   // Neighbourhood within the largest half-span (v0 * rr / 2 on each side): per-axis direction
   // ranges and the turning of the other vertices, by distance from this vertex.
-  const double span_max = 0.5 * v0 * rr_;
+  const double span_max = v0 * rr_;
   std::vector<Nb>& nb = nb_;
   nb.clear();
   for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
@@ -282,26 +352,27 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     nb.push_back({d, k > id ? q.turn : 0.0, q.u, true});
   }
   (void)final;
-  // Per-axis acceleration cap at speed v: velocity change across the vertex within +-v rr / 2.
+  // Per-axis acceleration cap at speed v. The window rule compares command velocities L1 periods
+  // apart, i.e. up to W = v (L1 + 1) <= v rr of path apart. Every such pair (p1 before p2) straddles
+  // the vertex at the start of p2's chord, with p2's chord at distance 0 after it and p1's chord
+  // within W before it (and that vertex's cap covers both: its region is +-C rr). So each vertex
+  // checks its next chord against the chords within v rr before it, and its previous chord against
+  // the chords within v rr after it (one-sided). The first version (+-v rr / 2 on both sides)
+  // missed pairs across three short chords: cam_dense_random's chords 945/948 made the window
+  // infeasible at 0.0667 mm/period and the repair crawled at 7e-10 mm/period (12 GB of pulses);
+  // +-v rr on both sides is safe but counts pairs 2 W apart (trochoidal_chords 1.64x slower).
+  const Vector3d u_prev = pr.u, u_next = c.u;
   auto acc_cap = [&](double v) {
-    const double s = 0.5 * v * rr_;
-    Vector3d mn_b = Vector3d::Constant(kInf), mx_b = Vector3d::Constant(-kInf);
-    Vector3d mn_a = mn_b, mx_a = mx_b;
+    const double s = v * rr_;
+    Vector3d du = Vector3d::Zero();
     for (const auto& n : nb) {
       if (n.d > s && !(n.d == 0.0)) continue;
-      if (n.after) {
-        mn_a = mn_a.cwiseMin(n.u);
-        mx_a = mx_a.cwiseMax(n.u);
-      } else {
-        mn_b = mn_b.cwiseMin(n.u);
-        mx_b = mx_b.cwiseMax(n.u);
-      }
+      du = du.cwiseMax(n.after ? Vector3d((n.u - u_prev).cwiseAbs())
+                               : Vector3d((u_next - n.u).cwiseAbs()));
     }
     double cap = kInf;
-    for (int i = 0; i < 3; ++i) {
-      const double du = std::max(mx_a[i] - mn_b[i], mx_b[i] - mn_a[i]);
-      if (du > 1e-12) cap = std::min(cap, A_[i] / du);
-    }
+    for (int i = 0; i < 3; ++i)
+      if (du[i] > 1e-12) cap = std::min(cap, A_[i] / du[i]);
     return cap;
   };
   // The largest constant speed the window rule allows through the neighbourhood (the span, and
@@ -358,7 +429,11 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   // Speed only (g = 0) and with a rest (the overlap reduction of seed 004) at speeds up to what
   // a rest allows (the command drops to zero at the vertex: v |u_i| <= A_i on both sides).
   const double c_speed = speed_for(vhi, 0);
-  if (c_speed > q0 && cost(c_speed, 0) < best_cost) {
+  // A corner the chords' own caps already hold below q0 (a slow feed next to a rapid) is passed at
+  // that speed, not turned into an exact stop with its rest of L - 1 periods: openvoronoi-ttt-vcarve
+  // (F6 plunges between rapids) stopped ~1000 times, 16 s of its 112 s excess over LinuxCNC.
+  const bool uncapped = c_speed >= v0 * (1.0 - 1e-9);
+  if ((c_speed > q0 || uncapped) && cost(c_speed, 0) < best_cost) {
     best_c = c_speed;
     best_g = 0;
     best_cost = cost(c_speed, 0);
@@ -972,8 +1047,24 @@ void LookaheadPlanner::plan(bool final) {
     if (fail.kind == Failure::Kind::kWindow) {
       ++stats_.accel_repairs;
       Chord& c = chord(std::clamp(fail.chord, chords_.front().id, next_id_ - 1));
-      c.repair_cap = std::min(c.repair_cap, std::min(c.cap, 0.7 * std::max(fail.cap, 1e-9)));
-      if (iter > 30) c.repair_cap = std::min(c.repair_cap, 0.25 * c.repair_cap);
+      // Never below the speed a stop is one fine step from (q0): a window that no speed above it
+      // satisfies at this chord is entered too fast, so the vertex at its start becomes an exact
+      // stop (the backward pass then brakes for it) when it is still ahead of the committed
+      // position. Without this floor a repair to 0.7 * 0 crawled forever (cam_dense_random).
+      const double q0 = std::isfinite(c.dv) ? c.dv / (kFine + 1.0) : 0.0;
+      double target = std::min(c.cap, 0.7 * fail.cap);
+      if (iter > 30) target = std::min(target, 0.25 * std::min(c.repair_cap, c.cap));
+      // Repeated failures at one place also end in a stop: speed caps that persist (repair_cap
+      // is never raised again) cost more than one stop (random_corners crawled to 1042 s).
+      if ((target < q0 || iter > 20) && c.id > committed_.chord && c.id > chords_.front().id &&
+          !c.stop) {
+        c.stop = true;
+        c.decided = false;
+      } else {
+        // Below q0 only without a verified continuation to fall back on (after a barrier).
+        c.repair_cap = std::min(c.repair_cap,
+                                std::max(target, iter > 30 && !have_fallback_ ? 1e-3 * q0 : q0));
+      }
       // Corners next to it see the lower speed.
       for (std::int64_t k = c.id; k <= std::min(c.id + 1, next_id_ - 1); ++k)
         if (k > committed_.chord) chord(k).decided = false;
@@ -1032,7 +1123,14 @@ void LookaheadPlanner::barrier(SegmentKind kind, const std::string& msg, const B
     }
     out_.push_back(s);
   }
-  earliest_tau_ = static_cast<double>(t_stop + static_cast<std::int64_t>(
+  // After a hold marker the interpolator restarts its time scale from 0 and ramps it back to 1 at
+  // 1/(L - 1) per period (Interpolator::step, the override rate limit): plan time advances by
+  // k (k + 1) / (2 (L - 1)) in k periods, L / 2 until full speed. Motion planned inside that ramp
+  // is played time-warped, its acceleration raised by p' s'': 2875 mm/s^2 per period and 2150 over
+  // 10 ms on cam_post (limit 2000; the vertex error of multivibrator-back, 50.2 um, too). Motion
+  // after a marker therefore starts when the scale is back at 1 (ceil(L / 2) + 1 periods later).
+  const std::int64_t marker = kind != SegmentKind::kMotion ? (L_ + 1) / 2 + 1 : 0;
+  earliest_tau_ = static_cast<double>(t_stop + marker + static_cast<std::int64_t>(
                                                    std::ceil(extra_s / T_ - 1e-9)));
   // Everything before has stopped exactly on the last point: start afresh from rest.
   if (!chords_.empty()) {

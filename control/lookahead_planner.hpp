@@ -97,6 +97,11 @@ class LookaheadPlanner {
     double r = 0.0;          // region half-length, mm
     double model_e = 0.0;    // modelled error at the decision, mm
     bool reported = false;
+    // Collinear merging (try_merge): programmed vertices inside this chord, the block feed and
+    // whether `turn` was computed against a previous chord.
+    std::vector<Eigen::Vector3d> dropped;
+    double block_feed_mm_min = 0.0;
+    bool has_prev = false;
   };
   struct Piece {
     double s0 = 0.0, s1 = 0.0;
@@ -142,6 +147,11 @@ class LookaheadPlanner {
 
   void add_chord(const Block& b, const Eigen::Vector3d& a, const Eigen::Vector3d& e,
                  double chord_err);
+  // Merges the line b (from the end of the last chord to e) into the last chord when it is short,
+  // the last chord is not planned yet, and every programmed vertex inside stays within
+  // kMergeShare * P of the merged chord (whose verification tolerance shrinks by that much).
+  bool try_merge(const Block& b, const Eigen::Vector3d& e);
+  void set_limits(Chord& c, int line);
   void barrier(SegmentKind kind, const std::string& msg, const Block& b, double extra_s);
   void maybe_plan();
   // Plans from the committed state to the look-ahead end (a stop), verifies, commits a prefix.
