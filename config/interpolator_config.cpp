@@ -28,9 +28,11 @@ InterpolatorConfig parse_interpolator(Section& s) {
   c.rapid_override_max_percent =
       s.number("rapid_override_max_percent", c.rapid_override_max_percent, 1.0, 100.0);
   c.floor_rounding = s.choice("rounding", "ceil", {"ceil", "floor"}) == "floor";
-  const std::string m = s.choice("method", "true", {"true", "paper", "exhaustive"});
-  c.method = m == "paper" ? control::BlendMethod::kPaper
-                          : (m == "exhaustive" ? control::BlendMethod::kExhaustive : control::BlendMethod::kTrue);
+  const std::string m = s.choice("method", "true", {"true", "paper", "exhaustive", "lookahead"});
+  c.method = m == "paper"        ? control::BlendMethod::kPaper
+             : m == "exhaustive" ? control::BlendMethod::kExhaustive
+             : m == "lookahead"  ? control::BlendMethod::kLookahead
+                                 : control::BlendMethod::kTrue;
   c.optional_stop = s.boolean("optional_stop", c.optional_stop);
   c.queue_capacity = s.integer("queue_capacity", c.queue_capacity, 16, 1 << 20);
   s.finish();

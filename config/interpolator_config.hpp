@@ -8,7 +8,8 @@
 //   feed_override_max_percent: 150
 //   rapid_override_max_percent: 100   rapid override ceiling (G0 runs at most at its planned speed)
 //   rounding: ceil         block sample counts: ceil (never faster than F) | floor (paper)
-//   method: true           blend search: true (verified true-path tolerance) | paper | exhaustive
+//   method: true           blend search: true (verified true-path tolerance) | paper | exhaustive |
+//                          lookahead (velocity look-ahead before the FIR, issue 23; not the default yet)
 //   optional_stop: false   M1 holds when true
 //   queue_capacity: 4096   RT segment ring size
 // The period is machine.period_s.
