@@ -9,6 +9,7 @@
 #include "control/blend_planner.hpp"
 #include "control/fir_interpolator.hpp"
 #include "control/path_meter.hpp"
+#include "tests/support/plan_into_interpolator.hpp"
 
 using namespace contour::control;
 using Eigen::Vector3d;
@@ -48,23 +49,10 @@ PlanRun run(const std::vector<Block>& blocks, const Vector3d& start) {
   pp.max_velocity_mm_min = Vector3d::Constant(kVmaxMmMin);
   pp.max_accel_mm_s2 = Vector3d::Constant(kAmaxMmS2);
   pp.rapid_mm_min = kVmaxMmMin;
-  BlendPlanner pl(pp, start);
   PathMeter meter(pp.period_s, 4.0, 10, kTolMm);
-  for (const auto& b : blocks) {
-    if (b.kind == BlockKind::kMotion) meter.add_segment(b.seg, b.line);
-    pl.push(b);
-  }
-  std::vector<PlannedSegment> segs;
-  PlannedSegment seg;
-  while (pl.pop(seg)) segs.push_back(seg);
   Interpolator ip;
-  InterpolatorParams p;
-  p.fir_taps = kTaps;
-  p.capacity = segs.size() + 8;
-  ip.configure(p, start);
-  for (const auto& x : segs) ip.push(x);
+  contour::test::plan_into_interpolator(pp, blocks, start, meter, ip);
   PlanRun r;
-  meter.add_sample(start);
   InterpOutput out;
   for (int guard = 0; guard < 200'000; ++guard) {
     const auto st = ip.step(1.0, out);
