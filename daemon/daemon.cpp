@@ -391,7 +391,6 @@ void Daemon::reload_config() {
     ++reloads_rejected_;
     return;
   }
-  ++reloads_;
   const std::vector<KeyChange> changes = diff_config(running_yaml_, tree);
   ReloadReport rep;
   auto applied = [&](const KeyChange& c) { rep.applied.push_back(change_text(c)); };
@@ -524,6 +523,9 @@ void Daemon::reload_config() {
   }
   last_reload_ = std::move(rep);
   running_yaml_ = tree;
+  // Counted only now, under reload_mu_ with last_reload_: a client that sees the count go up
+  // sees this reload's report with it.
+  ++reloads_;
 }
 
 control::ServoParams Daemon::servo_params_for(const config::ControlConfig& control) const {

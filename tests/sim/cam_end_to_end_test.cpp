@@ -16,6 +16,7 @@
 #include <string>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 #include "tests/support/run_cmd.hpp"
 
 namespace {
@@ -94,8 +95,10 @@ TEST(CamEndToEnd, ToolChangePauseResumeAndTheFinalMachinePositionIsLinuxCncs) {
   EXPECT_NEAR(ly, -7.25, 1e-6) << out;
   EXPECT_NEAR(lz, 40.0, 1e-6) << out;
 
-  // The daemon: config/sim.yaml (its tool table is config/sim.tbl's) with this .var file.
-  std::string y = contour::test::slurp(kSrc + "/config/sim.yaml");
+  // The daemon: config/sim.yaml (its tool table is config/sim.tbl's) with this .var file, and M6
+  // as a manual tool change (the pause this test is about; the carousel runs M6 in
+  // PlcCarouselDaemon).
+  std::string y = contour::test::sim_yaml(contour::test::SimPlc::kManualToolChange);
   const std::string var = "var_file: ${STATE_DIRECTORY:-/tmp}/contourd-sim.var";
   ASSERT_NE(y.find(var), std::string::npos);
   y.replace(y.find(var), var.size(), "var_file: " + (dir / "machine.var").string());

@@ -13,7 +13,10 @@
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
+
+#include "tests/support/sim_config.hpp"
 
 namespace {
 
@@ -257,16 +260,14 @@ std::array<double, 3> csv_chatter(const std::string& path) {
 }
 
 std::string sim_yaml_with(const std::string& derivative) {
-  std::FILE* f = std::fopen(CONTOUR_SOURCE_DIR "/config/sim.yaml", "r");
-  std::string text;
-  std::array<char, 4096> buf{};
-  while (f != nullptr && std::fgets(buf.data(), buf.size(), f) != nullptr) {
-    text += buf.data();
-    if (std::string(buf.data()).rfind("  delay_compensation:", 0) == 0) {
-      text += "  derivative: " + derivative + "\n";
-    }
+  // sim.yaml with its PLC program paths absolute (tests/support), a derivative: line after
+  // control.delay_compensation.
+  std::istringstream in(contour::test::sim_yaml());
+  std::string text, line;
+  while (std::getline(in, line)) {
+    text += line + "\n";
+    if (line.rfind("  delay_compensation:", 0) == 0) text += "  derivative: " + derivative + "\n";
   }
-  if (f != nullptr) std::fclose(f);
   const std::string path = ::testing::TempDir() + "sim_derivative.yaml";
   std::FILE* o = std::fopen(path.c_str(), "w");
   if (o != nullptr) {

@@ -29,6 +29,7 @@
 // tests/unit/drivers/modbus_dynamometer_test.cpp).
 #include "tools/contour-machine-sim/dynamometer_server.cpp"
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 
 extern char** environ;
 
@@ -50,7 +51,7 @@ std::string io_config_path(const std::string& tag) {
 }
 std::string write_io_config(const std::string& tag, const std::string& extra_yaml) {
   const std::string p = io_config_path(tag);
-  std::ofstream(p) << slurp(kSrc + "/config/sim.yaml") << "\n" << extra_yaml;
+  std::ofstream(p) << contour::test::sim_yaml() << "\n" << extra_yaml;
   return p;
 }
 

@@ -14,6 +14,7 @@
 
 #include "config/config.hpp"
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 #include "tests/support/run_cmd.hpp"
 
 namespace {
@@ -59,7 +60,7 @@ TEST(IdentifyDaemon, GainsSaveStoresTheMeasuredModelAndStartUpWarnsOnADelayMisma
   const fs::path dir = fs::temp_directory_path() / ("identify_save_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const fs::path cfg = dir / "machine.yaml";
-  fs::copy_file(kSrc + "/config/sim.yaml", cfg, fs::copy_options::overwrite_existing);
+  contour::test::write_sim_yaml(cfg.string());  // sim.yaml, its PLC program paths absolute
   std::string saved_text;
   double k = 0.0, tau_ms = 0.0;
   {

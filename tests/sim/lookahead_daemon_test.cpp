@@ -13,6 +13,7 @@
 #include <string>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace {
 
@@ -23,7 +24,7 @@ const std::string kSrc = CONTOUR_SOURCE_DIR;
 
 // config/sim.yaml with interpolator.method `method`.
 std::string config_with(const std::string& method) {
-  std::string y = contour::test::slurp(kSrc + "/config/sim.yaml");
+  std::string y = contour::test::sim_yaml();
   const std::string key = "interpolator:\n";
   EXPECT_NE(y.find(key), std::string::npos);
   y.replace(y.find(key), key.size(), key + "  method: " + method + "\n");

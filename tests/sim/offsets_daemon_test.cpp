@@ -12,6 +12,7 @@
 #include <string>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace {
 
@@ -23,7 +24,7 @@ const std::string kSrc = CONTOUR_SOURCE_DIR;
 // config/sim.yaml with the var file and a copy of config/sim.tbl in `dir`.
 std::string make_config(const fs::path& dir) {
   fs::create_directories(dir);
-  std::string y = contour::test::slurp(kSrc + "/config/sim.yaml");
+  std::string y = contour::test::sim_yaml();
   const std::string tbl =
       "  tools:\n    - {number: 1, length_mm: 0}\n    - {number: 2, length_mm: 12.5}\n"
       "    - {number: 3, length_mm: 25}\n    - {number: 4, length_mm: 40}\n";

@@ -1,4 +1,4 @@
-// contourd (the built binary) with config/sim_plc.yaml: the soft PLC's example machine logic on
+// contourd (the built binary) with config/sim.yaml: the soft PLC's example machine logic on
 // the built-in simulated machine, through the socket (issue 20). A program runs; the door is
 // opened (forced: the sim bus allows forcing) -> HOLD with the PLC's requests in `status.plc`;
 // `resume` is refused while it is open and accepted once it is closed; the program completes.
@@ -6,10 +6,15 @@
 // cannot be forced; without a plc: section `io` is refused. Waits are bounded polls.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/run_cmd.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace {
 
@@ -30,7 +35,7 @@ json signal(const json& io, const std::string& name) {
 }
 
 TEST(PlcDaemon, DoorInterlockHoldsAndResumesAProgramThroughTheSocket) {
-  contour::test::DaemonProcess d("plc", with_config("/config/sim_plc.yaml"));
+  contour::test::DaemonProcess d("plc", with_config("/config/sim.yaml"));
   ASSERT_TRUE(d.connected()) << d.log();
   ASSERT_EQ(d.state(), "READY") << d.log();
 
@@ -74,8 +79,78 @@ TEST(PlcDaemon, DoorInterlockHoldsAndResumesAProgramThroughTheSocket) {
   EXPECT_NE(nc.value("error", std::string()).find("only plc.signals"), std::string::npos) << nc.dump();
 }
 
+// config/sim.yaml as shipped: M6 runs the example machine logic's carousel sequence
+// (config/plc/toolchanger.st; tool T lives in pocket T) instead of pausing for the operator. The
+// program runs to completion without a `resume`, never in HOLD, and the carousel stands at
+// pocket 3 with the drawbar clamped on tool 3, which status reports in the spindle.
+TEST(PlcDaemon, SimYamlRunsM6OnTheCarouselWithoutAPause) {
+  contour::test::DaemonProcess d("carousel", with_config("/config/sim.yaml"));
+  ASSERT_TRUE(d.connected()) << d.log();
+  ASSERT_EQ(d.state(), "READY") << d.log();
+  EXPECT_NE(signal(d.ok({{"cmd", "io"}}), "carousel_pocket")["value"], 3) << "the carousel must have to turn";
+  const json r = d.ok({{"cmd", "run"},
+                       {"program", "G21 G90 G17\nG0 X5 Y5\nT3 M6\nG1 X10 F600\nM2\n"},
+                       {"name", "carousel.ngc"}});
+  ASSERT_TRUE(r.contains("job")) << r.dump();
+  const auto job = r["job"].get<std::uint64_t>();
+  bool held = false;
+  json st = d.wait_status(
+      [&](const json& s) {
+        held = held || s["state"] == "HOLD" || s.contains("tool_change");
+        return s["state"] == "READY" && s.value("tool", -1) == 3;
+      },
+      6000);
+  EXPECT_EQ(st["state"], "READY") << st.dump() << "\n" << d.log();
+  EXPECT_FALSE(held) << "M6 paused for the operator although the machine logic runs the carousel";
+  const json res = d.wait_finished(job);
+  EXPECT_TRUE(res.value("completed", false)) << res.dump() << "\n" << d.log();
+  EXPECT_EQ(d.ok({{"cmd", "status"}})["tool"], 3);
+  const json io = d.ok({{"cmd", "io"}});
+  EXPECT_EQ(signal(io, "carousel_pocket")["value"], 3) << io.dump();
+  EXPECT_EQ(signal(io, "carousel_in_position")["value"], true);
+  EXPECT_EQ(signal(io, "drawbar_clamped")["value"], true);
+}
+
+// `contourctl io --watch`: the image again every --interval, each after a "cycle N" line whose
+// cycle advances; --json gives one object per line.
+TEST(PlcDaemon, IoWatchRedrawsTheImage) {
+  contour::test::DaemonProcess d("iowatch", with_config("/config/sim.yaml"));
+  ASSERT_TRUE(d.connected()) << d.log();
+  const std::string ctl = std::string(CONTOUR_BINARY_DIR) + "/tools/contourctl --socket " + d.sock();
+  std::string out;
+  ASSERT_EQ(contour::test::run_cmd(ctl + " io --watch --count 3 --interval 0.05", &out), 0) << out;
+  std::vector<unsigned long long> cycles;
+  std::size_t headers = 0, doors = 0;
+  std::istringstream in(out);
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("cycle ", 0) == 0) cycles.push_back(std::stoull(line.substr(6)));
+    if (line.rfind("NAME ", 0) == 0) ++headers;
+    if (line.rfind("door_closed ", 0) == 0) ++doors;
+  }
+  ASSERT_EQ(cycles.size(), 3U) << out;
+  EXPECT_EQ(headers, 3U) << out;
+  EXPECT_EQ(doors, 3U) << out;
+  EXPECT_LT(cycles[0], cycles[2]) << out;
+  out.clear();  // run_cmd appends
+  ASSERT_EQ(contour::test::run_cmd(ctl + " --json io --watch --count 2 --interval 0.05", &out), 0) << out;
+  std::istringstream js(out);
+  int objects = 0;
+  for (std::string line; std::getline(js, line);) {
+    if (line.empty()) continue;
+    const json j = json::parse(line, nullptr, false);
+    ASSERT_FALSE(j.is_discarded()) << line;
+    EXPECT_TRUE(j.contains("signals")) << line;
+    ++objects;
+  }
+  EXPECT_EQ(objects, 2) << out;
+}
+
 TEST(PlcDaemon, WithoutAPlcSectionIoIsRefused) {
-  contour::test::DaemonProcess d("noplc", with_config("/config/sim.yaml"));
+  contour::test::DaemonProcess::Options o;
+  o.config = contour::test::write_sim_yaml(
+      (std::filesystem::temp_directory_path() / ("contour_noplc_" + std::to_string(::getpid()) + ".yaml")).string(),
+      contour::test::SimPlc::kNone);
+  contour::test::DaemonProcess d("noplc", o);
   ASSERT_TRUE(d.connected()) << d.log();
   const json r = d.call({{"cmd", "io"}});
   EXPECT_FALSE(r.value("ok", true));

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 #include "tests/support/run_cmd.hpp"
 
 namespace {
@@ -95,7 +96,7 @@ using contour::test::run_cmd;
 
 // sim.yaml with extra `socket:` keys, in the test's own directory.
 std::string sim_config_with_socket(const std::string& tag, const std::string& keys) {
-  std::string text = contour::test::slurp(kSrc + "/config/sim.yaml");
+  std::string text = contour::test::sim_yaml();
   const std::size_t at = text.find("\nsocket:\n");
   EXPECT_NE(at, std::string::npos);
   text.insert(at + 9, keys);

@@ -15,6 +15,7 @@
 
 #include "tests/support/daemon_process.hpp"
 #include "tests/support/run_cmd.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace {
 
@@ -28,8 +29,16 @@ const std::string kProgram =
 
 using contour::test::run_cmd;
 
+// config/sim.yaml with its machine logic's tool changer switched off (plc.tool_change enabled:
+// false): M6 is the operator's manual change, the pause this file tests. With the shipped
+// carousel M6 runs the PLC sequence instead (tests/sim/plc_daemon_test.cpp).
+std::string manual_tool_change_config() {
+  const fs::path p = fs::temp_directory_path() / ("contour_manual_tc_" + std::to_string(::getpid()) + ".yaml");
+  return contour::test::write_sim_yaml(p.string(), contour::test::SimPlc::kManualToolChange);
+}
+
 TEST(ToolChangePause, RunStartsAProgramThatBeginsWithAToolChangeAndResumeCompletesIt) {
-  contour::test::DaemonProcess d("toolchange", {kSrc + "/config/sim.yaml", {}, 1000, 500});
+  contour::test::DaemonProcess d("toolchange", {manual_tool_change_config(), {}, 1000, 500});
   ASSERT_TRUE(d.connected()) << d.log();
   const json r = d.ok({{"cmd", "run"}, {"program", kProgram}, {"name", "cam.ngc"}});
   ASSERT_TRUE(r.contains("job")) << r.dump();
@@ -52,7 +61,7 @@ TEST(ToolChangePause, RunStartsAProgramThatBeginsWithAToolChangeAndResumeComplet
 }
 
 TEST(ToolChangePause, ContourctlRunWaitAnnouncesThePauseAndExitsZeroAfterResume) {
-  contour::test::DaemonProcess d("toolchange_ctl", {kSrc + "/config/sim.yaml", {}, 1000, 500});
+  contour::test::DaemonProcess d("toolchange_ctl", {manual_tool_change_config(), {}, 1000, 500});
   ASSERT_TRUE(d.connected()) << d.log();
   const fs::path prog = fs::path(d.sock()).parent_path() / "cam.ngc";
   std::ofstream(prog) << kProgram;

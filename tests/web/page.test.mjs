@@ -76,7 +76,10 @@ try {
   // --- tokens and roles ------------------------------------------------------------------------------
   const cfgDir = fs.mkdtempSync(path.join(os.tmpdir(), 'contour-web-tokens-'));
   const cfg = path.join(cfgDir, 'web.yaml');
-  fs.writeFileSync(cfg, `${fs.readFileSync(path.join(h.SRC, 'config/sim.yaml'), 'utf8')}
+  // sim.yaml's machine logic names its programs relative to config/: made absolute for the copy.
+  const simYaml = fs.readFileSync(path.join(h.SRC, 'config/sim.yaml'), 'utf8')
+    .replaceAll('{file: plc/', `{file: ${path.join(h.SRC, 'config/plc')}/`);
+  fs.writeFileSync(cfg, `${simYaml}
 web:
   tokens:
     - {name: shop, role: operator, token: operator-token-0123456789}

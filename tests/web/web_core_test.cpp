@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "config/config.hpp"
+#include "tests/support/sim_config.hpp"
 #include "tools/contour-web/hub.hpp"
 #include "tools/contour-web/scope.hpp"
 #include "tools/contour-web/security.hpp"
@@ -351,10 +352,7 @@ TEST(Security, StaticPaths) {
 
 // config/sim.yaml with a `web:` section appended.
 contour::config::Config load(const std::string& web) {
-  std::ifstream in(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return contour::config::load_config_string(ss.str() + "\nweb:\n" + web, "web.yaml");
+  return contour::config::load_config_string(contour::test::sim_yaml() + "\nweb:\n" + web, "web.yaml");
 }
 std::string errors_of(const std::string& web) {
   try {

@@ -1,6 +1,6 @@
 // Google Benchmark of the soft PLC (issue 20), per servo cycle:
 //   BM_PlcScanExample   PlcEngine::scan() of the shipped example machine logic
-//                       (config/sim.yaml + config/plc/sim_machine.yaml: 5 programs, the simulated
+//                       (config/sim.yaml's plc: section: 5 programs, the simulated
 //                       plant stepped, NC status in, requests out), the machine RUNNING, a tool
 //                       change in progress now and then. What the `logic` stage adds to a cycle.
 //   BM_PlcVmExample     the five compiled programs alone through the VM (no I/O, no plant)
@@ -32,7 +32,7 @@ std::string read(const std::string& p) {
 
 config::Config example() {
   const std::string dir = std::string(CONTOUR_SOURCE_DIR) + "/config/";
-  return config::load_config_string(read(dir + "sim.yaml") + "\n" + read(dir + "plc/sim_machine.yaml"),
+  return config::load_config_string(read(dir + "sim.yaml"),
                                     dir + "bench_plc.yaml");
 }
 

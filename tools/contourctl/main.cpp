@@ -717,6 +717,10 @@ int main(int argc, char** argv) {
   std::vector<std::string> io_args, plc_args;
   auto* io = app.add_subcommand("io", "soft PLC I/O image | io force NAME VALUE | io unforce NAME|all");
   io->add_option("ARGS", io_args);
+  bool io_watch = false;
+  io->add_flag("--watch", io_watch, "redraw the image every --interval seconds (Ctrl-C ends)");
+  io->add_option("--interval", watch_interval, "--watch: seconds between updates")->check(CLI::Range(0.01, 3600.0));
+  io->add_option("--count", watch_count, "--watch: stop after N updates (0: until Ctrl-C)");
   // Offsets, tools, touch-off, MDI (issue 18).
   std::vector<std::string> offsets_args, tools_args;
   std::string touch_axis, touch_offset, mdi_text;
@@ -937,19 +941,31 @@ int main(int argc, char** argv) {
     } else if (cmd == "io") {
       const std::size_t n = io_args.size();
       if (n == 0) {
-        const json r = c.call(req);
-        if (as_json) {
-          print(r, true);
-        } else {
-          std::printf("%-24s %-5s %-10s %-10s %s\n", "NAME", "TYPE", "DIRECTION", "VALUE", "SOURCE");
-          for (const auto& sg : r.value("signals", json::array())) {
-            std::string v = sg.contains("value") ? sg["value"].dump() : "?";
-            if (sg.value("forced", false)) v += " (forced)";
-            std::printf("%-24s %-5s %-10s %-10s %s\n", sg.value("name", std::string()).c_str(),
-                        sg.value("type", std::string()).c_str(),
-                        sg.value("direction", std::string()).c_str(), v.c_str(),
-                        sg.value("source", std::string()).c_str());
+        // One image, or with --watch one per --interval: a terminal redraws in place, a pipe
+        // gets each image after a "cycle N" line (--json: one object per line).
+        const bool tty = io_watch && ::isatty(STDOUT_FILENO) != 0 && !as_json;
+        if (io_watch) install_sigint();
+        for (long k = 0;; ++k) {
+          if (g_interrupted != 0) break;
+          const json r = c.call(req);
+          if (as_json) {
+            print(r, true);
+          } else {
+            if (tty) std::printf("\033[H\033[2J");
+            if (io_watch) std::printf("cycle %llu\n", static_cast<unsigned long long>(r.value("cycle", 0ULL)));
+            std::printf("%-24s %-5s %-10s %-10s %s\n", "NAME", "TYPE", "DIRECTION", "VALUE", "SOURCE");
+            for (const auto& sg : r.value("signals", json::array())) {
+              std::string v = sg.contains("value") ? sg["value"].dump() : "?";
+              if (sg.value("forced", false)) v += " (forced)";
+              std::printf("%-24s %-5s %-10s %-10s %s\n", sg.value("name", std::string()).c_str(),
+                          sg.value("type", std::string()).c_str(),
+                          sg.value("direction", std::string()).c_str(), v.c_str(),
+                          sg.value("source", std::string()).c_str());
+            }
+            std::fflush(stdout);
           }
+          if (!io_watch || (watch_count > 0 && k + 1 >= watch_count)) break;
+          std::this_thread::sleep_for(std::chrono::duration<double>(watch_interval));
         }
         return kExitOk;
       }

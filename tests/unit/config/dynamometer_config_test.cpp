@@ -13,6 +13,7 @@
 #include "config/gpio_config.hpp"
 #include "config/spindle_config.hpp"
 #include "tests/support/config_errors.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace cc = contour::config;
 namespace dm = contour::drivers::modbus;
@@ -174,8 +175,11 @@ TEST(SpindleConfig, AtSpeedWaitSimTypeAndCrossChecksWithTheBus) {
   using contour::test::config_errors;
   const std::string root = std::string(CONTOUR_SOURCE_DIR) + "/config/";
   auto with = [](const std::string& file, const std::string& from, const std::string& to) {
+    // sim.yaml's copy with its machine logic's program paths made absolute (tests/support).
     std::ifstream in(file);
-    std::string t((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string t = file.ends_with("/sim.yaml") ? contour::test::sim_yaml()
+                                                : std::string((std::istreambuf_iterator<char>(in)),
+                                                              std::istreambuf_iterator<char>());
     const auto at = t.find(from);
     EXPECT_NE(at, std::string::npos) << from;
     if (at != std::string::npos) t.replace(at, from.size(), to);

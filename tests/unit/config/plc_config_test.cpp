@@ -1,4 +1,4 @@
-// `plc:` section: the shipped example (config/plc/sim_machine.yaml merged into config/sim.yaml)
+// `plc:` section: the shipped example (the plc: section of config/sim.yaml)
 // loads and compiles; every binding kind parses; bad keys, values and bindings are errors naming
 // file:line:column and the key path; Structured Text errors of the programs come out of the same
 // load (all at once, through ConfigError: exit 78), including an output written by two programs.
@@ -13,6 +13,7 @@
 
 #include "config/config.hpp"
 #include "tests/support/config_errors.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace cc = contour::config;
 namespace plc = contour::control::plc;
@@ -26,12 +27,9 @@ std::string read(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
-// config/sim.yaml with the example plc: section, named as a file in config/ (program paths
-// resolve against it).
-std::string sim_with_plc() {
-  return read(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml") + "\n" +
-         read(std::string(CONTOUR_SOURCE_DIR) + "/config/plc/sim_machine.yaml");
-}
+// config/sim.yaml, which ends with the example plc: section, named as a file in config/
+// (program paths resolve against it).
+std::string sim_with_plc() { return read(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml"); }
 const std::string kSimName = std::string(CONTOUR_SOURCE_DIR) + "/config/sim_plc_test.yaml";
 
 // A scratch directory with .st files for error tests.
@@ -93,7 +91,7 @@ TEST(PlcConfig, ExampleMachineLoadsAndCompiles) {
 
 // The HIL variant: the same programs on contour-machine-sim's coupler.
 TEST(PlcConfig, HilFragmentLoadsWithTheSamePrograms) {
-  const std::string y = read(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml") + "\n" +
+  const std::string y = contour::test::sim_yaml(contour::test::SimPlc::kNone) + "\n" +
                         read(std::string(CONTOUR_SOURCE_DIR) + "/config/plc/hil_machine.yaml");
   const cc::Config cfg = cc::load_config_string(y, kSimName);
   ASSERT_NE(cfg.plc.compiled, nullptr);

@@ -18,6 +18,7 @@
 #include "daemon/plc_status.hpp"
 #include "loop_rig.hpp"
 #include "tests/support/alloc_counter.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace contour::daemon {
 namespace {
@@ -111,13 +112,6 @@ TEST(SimBusDriveIo, DefaultSwitchesSitAtTheSoftLimits) {
   }
 }
 
-std::string slurp(const std::string& rel) {
-  std::ifstream f(std::string(CONTOUR_SOURCE_DIR) + "/" + rel);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
 // config/sim.yaml plus a PLC program on X's drive I/O: a cam (0x60FD bit 16) holds the program,
 // the positive limit (bit 1) faults the axis and lights a lamp on 0x60FE:01 bit 16.
 config::Config drive_io_config() {
@@ -127,7 +121,7 @@ config::Config drive_io_config() {
                                          "  NC.feed_hold_req := x_cam;\n"
                                          "  x_lamp := x_plus;\n"
                                          "END_PROGRAM\n";
-  const std::string yaml = slurp("config/sim.yaml") + "\nplc:\n  programs: [{file: " + dir +
+  const std::string yaml = contour::test::sim_yaml(contour::test::SimPlc::kNone) + "\nplc:\n  programs: [{file: " + dir +
                            "/drive_io.st}]\n  signals:\n"
                            "    - {name: x_plus, cia402: {axis: X, input: positive_limit}}\n"
                            "    - {name: x_cam, cia402: {axis: X, input: 16}}\n"

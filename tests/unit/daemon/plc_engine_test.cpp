@@ -1,5 +1,5 @@
 // The soft PLC engine without a loop, in lockstep (scan k = cycle k, 1 ms): the shipped example
-// machine logic (config/sim.yaml + config/plc/sim_machine.yaml) on the simulated plant — door
+// machine logic (config/sim.yaml's plc: section) on the simulated plant — door
 // interlock requests, coolant, lube, overtravel switches, the M6 carousel sequence and user
 // M-codes through the handshakes; scan order (inputs once, programs in order, outputs once) and
 // scheduling; forcing rules; runtime errors; a lost Modbus I/O coupler (contour-machine-sim's, on
@@ -38,7 +38,7 @@ std::string read(const std::string& p) {
 
 cfg::Config example(const std::string& extra = "") {
   const std::string dir = std::string(CONTOUR_SOURCE_DIR) + "/config/";
-  return cfg::load_config_string(read(dir + "sim.yaml") + "\n" + read(dir + "plc/sim_machine.yaml") + extra,
+  return cfg::load_config_string(read(dir + "sim.yaml") + extra,
                                  dir + "plc_engine_test.yaml");
 }
 

@@ -1,4 +1,4 @@
-// M6 and the user M-codes handed to the machine logic (issue 20): config/sim_plc.yaml's example
+// M6 and the user M-codes handed to the machine logic (issue 20): config/sim.yaml's example
 // logic (toolchanger.st on the simulated 8-pocket carousel, mcodes.st) on the in-process
 // simulated machine, stepped in lockstep. The program stays RUNNING while the PLC's sequence
 // runs and goes on when the PLC says done; the path waits at its exact stop meanwhile; a done that
@@ -21,7 +21,7 @@ using control::plc::PlantPoint;
 using test_rig::Rig;
 
 config::Config sim_plc() {
-  return config::load_config_file(std::string(CONTOUR_SOURCE_DIR) + "/config/sim_plc.yaml");
+  return config::load_config_file(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml");
 }
 
 struct PlcRig {

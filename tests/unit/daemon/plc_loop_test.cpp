@@ -1,4 +1,4 @@
-// The soft PLC in the servo loop's `logic` stage (issue 20, phase 2): config/sim_plc.yaml's
+// The soft PLC in the servo loop's `logic` stage (issue 20, phase 2): config/sim.yaml's
 // example machine logic on the in-process simulated machine, stepped in lockstep. The PLC only
 // requests; the state machine acts: door open -> HOLD, resume refused while it is open, allowed
 // once it closes; run / jog refused while start is inhibited; an overtravel switch faults the
@@ -12,22 +12,14 @@
 #include "daemon/plc_engine.hpp"
 #include "loop_rig.hpp"
 #include "tests/support/alloc_counter.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace contour::daemon {
 namespace {
 
 using test_rig::Rig;
 
-std::string slurp(const std::string& rel) {
-  std::ifstream f(std::string(CONTOUR_SOURCE_DIR) + "/" + rel);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-config::Config sim_plc() {
-  return config::load_config_file(std::string(CONTOUR_SOURCE_DIR) + "/config/sim_plc.yaml");
-}
+config::Config sim_plc() { return test_rig::sim_config(); }
 
 bool refused(const Rig& r, CommandKind k, std::size_t from) {
   for (std::size_t i = from; i < r.events.size(); ++i) {
@@ -47,15 +39,23 @@ struct PlcRig {
   PlcEngine plc;
 };
 
-// config/sim_plc.yaml is config/sim.yaml plus config/plc/sim_machine.yaml, nothing else: the
-// example stays what the lead merges, and sim.yaml's behaviour is untouched.
-TEST(PlcLoop, SimPlcConfigIsSimYamlPlusTheExampleFragment) {
-  const std::string plc = slurp("config/sim_plc.yaml");
-  const std::string body = slurp("config/sim.yaml") + "\n" + slurp("config/plc/sim_machine.yaml");
-  ASSERT_GT(plc.size(), body.size());
-  EXPECT_EQ(plc.substr(plc.size() - body.size()), body);
-  EXPECT_FALSE(test_rig::sim_config().plc.present);
-  EXPECT_TRUE(sim_plc().plc.present);
+// config/sim.yaml ships the example machine logic (issue 20's "Done when"): five programs, M6
+// on the carousel, M100-M102; test support's variants drop it or make M6 a manual change.
+TEST(PlcLoop, SimYamlShipsTheExampleMachineLogic) {
+  const config::Config cfg = test_rig::sim_config();
+  ASSERT_TRUE(cfg.plc.present);
+  EXPECT_EQ(cfg.plc.programs.size(), 5u);
+  EXPECT_TRUE(cfg.plc.tool_change);
+  EXPECT_EQ(cfg.plc.mcodes.size(), 3u);
+  const std::string dir = ::testing::TempDir();
+  const config::Config manual = config::load_config_file(
+      contour::test::write_sim_yaml(dir + "/sim_manual.yaml", contour::test::SimPlc::kManualToolChange));
+  EXPECT_TRUE(manual.plc.present);
+  EXPECT_FALSE(manual.plc.tool_change);
+  const config::Config none = config::load_config_file(
+      contour::test::write_sim_yaml(dir + "/sim_noplc.yaml", contour::test::SimPlc::kNone));
+  EXPECT_FALSE(none.plc.present);
+  EXPECT_EQ(none.machine.axes.size(), cfg.machine.axes.size());
 }
 
 TEST(PlcLoop, DoorOpenHoldsTheProgramResumeOnlyOnceItIsClosed) {
@@ -172,7 +172,7 @@ TEST(PlcLoop, EstopRequestAndItsReset) {
   {
     std::ofstream(dir + "/estop.st") << "PROGRAM e\n  NC.estop_req := stop_button;\nEND_PROGRAM\n";
   }
-  const std::string yaml = slurp("config/sim.yaml") + "\nplc:\n  programs: [{file: " + dir +
+  const std::string yaml = contour::test::sim_yaml(contour::test::SimPlc::kNone) + "\nplc:\n  programs: [{file: " + dir +
                            "/estop.st}]\n  signals:\n    - {name: stop_button}\n";
   cfg = config::load_config_string(yaml, dir + "/x.yaml");
   Rig r(cfg);
