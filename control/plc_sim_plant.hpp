@@ -1,6 +1,6 @@
 #pragma once
 // The simulated machine around the soft PLC (issue 20): what the PLC's inputs see and its outputs
-// drive on the example machine of config/plc/sim_machine.yaml. One model, two hosts (style.md:
+// drive on the example machine of config/sim.yaml (its plc: section). One model, two hosts (style.md:
 // fakes are part of the product): daemon/plc_sim.hpp steps it inside the PLC scan on the sim bus
 // (lockstep, deterministic), and contour-machine-sim serves it as a Modbus TCP I/O coupler
 // (tools/contour-machine-sim/plant_io.hpp) for HIL.
