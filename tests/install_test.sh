@@ -43,9 +43,13 @@ done
 for f in lib/systemd/system/contourd.service lib/sysusers.d/contourd.conf \
          lib/udev/rules.d/60-contourd-gpio.rules share/doc/contourd/README.md \
          share/doc/contourd/daemon.md share/doc/contourd/config.md \
-         share/doc/contourd/examples/hil.yaml share/doc/contourd/examples/sim.yaml; do
+         share/doc/contourd/examples/hil.yaml share/doc/contourd/examples/sim.yaml \
+         share/doc/contourd/examples/plc/toolchanger.st share/doc/contourd/examples/sim.tbl; do
   [ -f "$p/$f" ] || bad "$p/$f missing"
 done
+# The installed example loads as it is (its machine logic's .st files beside it).
+"$p/bin/contourd" --config "$p/share/doc/contourd/examples/sim.yaml" --check-config >"$tmp/check.log" 2>&1 ||
+  { cat "$tmp/check.log"; bad "examples/sim.yaml does not pass --check-config where it is installed"; }
 unit=$p/lib/systemd/system/contourd.service
 [ -f "$unit" ] || { echo "install_test: FAILED (no unit)"; exit 1; }
 

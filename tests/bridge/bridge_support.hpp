@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 #include "tools/contour-bridge/payloads.hpp"
 
 extern char** environ;
@@ -354,7 +355,7 @@ class TempDir {
 // config/sim.yaml as a non-root developer or CI runs it (SCHED_OTHER, no memory lock: the sim bus
 // is in lockstep with the loop, its figures do not depend on timing), plus `extra` sections.
 inline std::string sim_config(const std::string& extra) {
-  std::string y = slurp(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml");
+  std::string y = contour::test::sim_yaml();
   auto replace = [&](const std::string& a, const std::string& b) {
     const auto p = y.find(a);
     if (p != std::string::npos) y.replace(p, a.size(), b);

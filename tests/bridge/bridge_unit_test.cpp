@@ -15,6 +15,7 @@
 #include "daemon/event_log.hpp"
 #include "daemon/servo_loop.hpp"
 #include "tests/support/config_errors.hpp"
+#include "tests/support/sim_config.hpp"
 #include "tools/contour-bridge/bridge.hpp"
 #include "tools/contour-bridge/credentials.hpp"
 #include "tools/contour-bridge/devices_xml.hpp"
@@ -29,12 +30,8 @@ using namespace contour::bridge;
 using contour::test::any_contains;
 using contour::test::config_errors;
 
-std::string sim_yaml() {
-  std::ifstream in(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+// config/sim.yaml, its PLC program paths absolute (tests/support/sim_config.hpp).
+std::string sim_yaml() { return contour::test::sim_yaml(); }
 
 contour::config::Config load(const std::string& extra) {
   return contour::config::load_config_string(sim_yaml() + extra, "test.yaml");

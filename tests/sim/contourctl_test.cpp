@@ -28,6 +28,7 @@
 
 #include "config/config.hpp"
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 
 extern char** environ;
 
@@ -327,12 +328,12 @@ TEST_F(ContourctlTest, GainsSetGetRoundTripAndSaveReloads) {
   // the loader reads the live gains back.
   const std::string cfg = (dir_ / "machine.yaml").string();
   const std::string saved = (dir_ / "machine_saved.yaml").string();
-  fs::copy_file(kSrc + "/config/sim.yaml", cfg, fs::copy_options::overwrite_existing);
+  contour::test::write_sim_yaml(cfg);  // sim.yaml, its PLC program paths absolute
   const Proc sv = ctl({"gains", "save", "--file", cfg, "--output", saved});
   ASSERT_EQ(sv.rc, 0) << sv.err;
   const std::string text = slurp(saved);
   EXPECT_NE(text.find("# Table 1 sampling time"), std::string::npos) << "comments lost:\n" << text;
-  EXPECT_EQ(slurp(cfg), slurp(kSrc + "/config/sim.yaml")) << "--output must leave --file alone";
+  EXPECT_EQ(slurp(cfg), contour::test::sim_yaml()) << "--output must leave --file alone";
   const Proc chk = run_proc({kDaemon, "--config", saved, "--check-config"}, dir_);
   EXPECT_EQ(chk.rc, 0) << chk.out << chk.err;
   const auto c = contour::config::load_config_file(saved);

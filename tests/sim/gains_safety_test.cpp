@@ -17,6 +17,7 @@
 #include "config/config.hpp"
 #include "daemon/gains_check.hpp"
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace {
 
@@ -102,7 +103,7 @@ TEST(GainsSafety, AGainTheActiveLawDoesNotUseIsRefusedNamingTheLaw) {
 }
 
 TEST(GainsSafety, SighupWithUnstableGainsIsRefusedWithTheReason) {
-  const std::string orig = slurp(kSrc + "/config/sim.yaml");
+  const std::string orig = contour::test::sim_yaml();
   const std::string path = temp_config("hup", orig);
   {
     Daemon d("gains_hup", path);
@@ -128,7 +129,7 @@ TEST(GainsSafety, SighupWithUnstableGainsIsRefusedWithTheReason) {
 
 TEST(GainsSafety, StartUpWithUnstableGainsExits78NamingTheFileAndAxis) {
   const std::string path =
-      temp_config("start", replaced(slurp(kSrc + "/config/sim.yaml"), "kp: [0.6, 0.6, 0.6]", "kp: [0.6, 100, 0.6]"));
+      temp_config("start", replaced(contour::test::sim_yaml(), "kp: [0.6, 0.6, 0.6]", "kp: [0.6, 100, 0.6]"));
   const fs::path dir = fs::temp_directory_path() / ("contourd_gains_start_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const std::string cmd = std::string(CONTOUR_BINARY_DIR) + "/daemon/contourd --config " + path +

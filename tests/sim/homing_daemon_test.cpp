@@ -13,6 +13,7 @@
 
 #include "tests/support/daemon_process.hpp"
 #include "tests/support/run_cmd.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace {
 
@@ -24,7 +25,7 @@ const std::string kCtl = std::string(CONTOUR_BINARY_DIR) + "/tools/contourctl";
 // switches (closed below -199.5 / -199.5 / -99.5 true), and home positions near the switches
 // (short moves: the test runs in real time). `search_mm`: home.search_distance_mm of X.
 std::string homing_config(const std::string& tag, double x_search_mm = 0.0) {
-  std::string y = contour::test::slurp(kSrc + "/config/sim.yaml");
+  std::string y = contour::test::sim_yaml();
   auto sub = [&y](const std::string& from, const std::string& to) {
     const auto at = y.find(from);
     EXPECT_NE(at, std::string::npos) << from;

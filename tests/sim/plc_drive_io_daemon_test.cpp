@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 
 namespace {
 
@@ -43,7 +44,7 @@ TEST(PlcDriveIoDaemon, HomeSwitchOnTheDriveInputReachesThePlcAndItsOutput) {
       fs::temp_directory_path() / ("drive_io_daemon_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   std::stringstream sim;
-  sim << std::ifstream(std::string(CONTOUR_SOURCE_DIR) + "/config/sim.yaml").rdbuf();
+  sim << contour::test::sim_yaml(contour::test::SimPlc::kNone);  // this test brings its own plc:
   std::ofstream(dir / "home.st") << "PROGRAM homing\n  NC.inhibit_start := x_home;\n"
                                     "  x_lamp := x_home;\nEND_PROGRAM\n";
   std::ofstream(dir / "c.yaml")

@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 
 extern char** environ;
 
@@ -115,7 +116,7 @@ Proc run(const std::vector<std::string>& args, const TempDir& dir, int max_polls
 // config/sim.yaml with telemetry.directory and (when > 0) socket.max_program_bytes changed.
 std::string write_config(const std::string& file, const std::string& telemetry_dir,
                          long max_program_bytes = 0) {
-  std::string y = slurp(kSrc + "/config/sim.yaml");
+  std::string y = contour::test::sim_yaml();
   const std::string tel = "telemetry:\n  directory: /tmp\n";
   const auto t = y.find(tel);
   EXPECT_NE(t, std::string::npos) << "config/sim.yaml changed: no '" << tel << "'";
@@ -340,7 +341,7 @@ TEST_F(PrivateTmpTest, TelemetryDirectoryInsidePrivateTmpExits78) {
 TEST(ServiceGainsSave, KeepsModeOwnerAndGroup) {
   TempDir d("gains");
   const std::string cfg = d / "contourd.yaml";
-  fs::copy_file(kSrc + "/config/sim.yaml", cfg);
+  contour::test::write_sim_yaml(cfg);  // sim.yaml, its PLC program paths absolute
   ASSERT_EQ(::chmod(cfg.c_str(), 0640), 0);
   const bool root = ::geteuid() == 0;
   // As root: root:daemon (gid 1), the case. Otherwise the mode alone.

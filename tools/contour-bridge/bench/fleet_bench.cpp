@@ -354,6 +354,11 @@ int run_fleet(int argc, char** argv) {
     const auto p = sim.find(a);
     if (p != std::string::npos) sim.replace(p, a.size(), b);
   };
+  // The copies live in a temporary directory: sim.yaml's machine logic names its programs relative
+  // to config/, so they become absolute.
+  for (auto at = sim.find("{file: plc/"); at != std::string::npos; at = sim.find("{file: plc/", at + 1)) {
+    sim.replace(at, 7, "{file: " + std::string(CONTOUR_SOURCE_DIR) + "/config/");
+  }
   if (!rt) {
     replace("priority: 80", "priority: 0");  // 2N processes on a shared machine: no SCHED_FIFO
     replace("lock_memory: true", "lock_memory: false");
