@@ -515,11 +515,22 @@ std::string watch_line(const json& st) {
   return o.str();
 }
 
-int cmd_watch(Client& c, double interval_s, long count, bool as_json) {
-  const bool tty = ::isatty(STDOUT_FILENO) != 0 && !as_json;
+// Calls show() every interval_s seconds until Ctrl-C, or `count` times when count > 0
+// (`watch`, `io --watch`).
+template <class F>
+void repeat_every(double interval_s, long count, F&& show) {
   install_sigint();
   for (long k = 0; count <= 0 || k < count; ++k) {
     if (g_interrupted != 0) break;
+    show();
+    if (count > 0 && k + 1 >= count) break;
+    std::this_thread::sleep_for(std::chrono::duration<double>(interval_s));
+  }
+}
+
+int cmd_watch(Client& c, double interval_s, long count, bool as_json) {
+  const bool tty = ::isatty(STDOUT_FILENO) != 0 && !as_json;
+  repeat_every(interval_s, count, [&] {
     const json st = c.call({{"cmd", "status"}});
     if (as_json) {
       std::cout << st.dump() << std::endl;
@@ -528,11 +539,23 @@ int cmd_watch(Client& c, double interval_s, long count, bool as_json) {
     } else {
       std::cout << watch_line(st) << std::endl;
     }
-    if (count > 0 && k + 1 >= count) break;
-    std::this_thread::sleep_for(std::chrono::duration<double>(interval_s));
-  }
+  });
   if (tty) std::cout << std::endl;
   return kExitOk;
+}
+
+// The `io` reply as a table; `cycle`: a "cycle N" line first (io --watch).
+void print_io_table(const json& r, bool cycle) {
+  if (cycle) std::printf("cycle %llu\n", static_cast<unsigned long long>(r.value("cycle", 0ULL)));
+  std::printf("%-24s %-5s %-10s %-10s %s\n", "NAME", "TYPE", "DIRECTION", "VALUE", "SOURCE");
+  for (const auto& sg : r.value("signals", json::array())) {
+    std::string v = sg.contains("value") ? sg["value"].dump() : "?";
+    if (sg.value("forced", false)) v += " (forced)";
+    std::printf("%-24s %-5s %-10s %-10s %s\n", sg.value("name", std::string()).c_str(),
+                sg.value("type", std::string()).c_str(), sg.value("direction", std::string()).c_str(),
+                v.c_str(), sg.value("source", std::string()).c_str());
+  }
+  std::fflush(stdout);
 }
 
 constexpr const char* kFooter = R"(
@@ -944,28 +967,19 @@ int main(int argc, char** argv) {
         // One image, or with --watch one per --interval: a terminal redraws in place, a pipe
         // gets each image after a "cycle N" line (--json: one object per line).
         const bool tty = io_watch && ::isatty(STDOUT_FILENO) != 0 && !as_json;
-        if (io_watch) install_sigint();
-        for (long k = 0;; ++k) {
-          if (g_interrupted != 0) break;
+        auto show = [&] {
           const json r = c.call(req);
           if (as_json) {
             print(r, true);
-          } else {
-            if (tty) std::printf("\033[H\033[2J");
-            if (io_watch) std::printf("cycle %llu\n", static_cast<unsigned long long>(r.value("cycle", 0ULL)));
-            std::printf("%-24s %-5s %-10s %-10s %s\n", "NAME", "TYPE", "DIRECTION", "VALUE", "SOURCE");
-            for (const auto& sg : r.value("signals", json::array())) {
-              std::string v = sg.contains("value") ? sg["value"].dump() : "?";
-              if (sg.value("forced", false)) v += " (forced)";
-              std::printf("%-24s %-5s %-10s %-10s %s\n", sg.value("name", std::string()).c_str(),
-                          sg.value("type", std::string()).c_str(),
-                          sg.value("direction", std::string()).c_str(), v.c_str(),
-                          sg.value("source", std::string()).c_str());
-            }
-            std::fflush(stdout);
+            return;
           }
-          if (!io_watch || (watch_count > 0 && k + 1 >= watch_count)) break;
-          std::this_thread::sleep_for(std::chrono::duration<double>(watch_interval));
+          if (tty) std::printf("\033[H\033[2J");
+          print_io_table(r, io_watch);
+        };
+        if (io_watch) {
+          repeat_every(watch_interval, watch_count, show);
+        } else {
+          show();
         }
         return kExitOk;
       }
