@@ -1,5 +1,6 @@
 #include "config/machine_config.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -16,13 +17,9 @@ void parse_home(Section& a, AxisConfig& ax) {
   }
   c.present = true;
   const std::string method = h.choice("method", "switch", {"switch", "drive", "absolute", "none"});
-  if (method == "drive") {
-    h.error("method",
-            "drive (CiA 402 homing mode 6) is not supported yet: use switch (the drive's home "
-            "input 0x60FD, searched by contourd) or absolute");
-  }
   c.method = method == "absolute" ? HomeConfig::Method::kAbsolute
              : method == "none"   ? HomeConfig::Method::kNone
+             : method == "drive"  ? HomeConfig::Method::kDrive
                                   : HomeConfig::Method::kSwitch;
   const double vmax = ax.max_velocity_mm_min;
   c.home_offset_mm = h.number("home_offset_mm", 0.0, -1e6, 1e6);
@@ -40,6 +37,25 @@ void parse_home(Section& a, AxisConfig& ax) {
     c.search_distance_mm = h.number("search_distance_mm", 1.2 * range, 0.001, 1e6);
     c.home_position_mm = h.number("home_position_mm", c.home_offset_mm, ax.min_mm, ax.max_mm);
     c.use_index = h.boolean("use_index", false);
+  } else if (c.method == HomeConfig::Method::kDrive) {
+    c.drive_method = static_cast<int>(h.required_integer("drive_method", -128, 127));
+    if (!drive_method_supported(c.drive_method)) {
+      h.error("drive_method",
+              std::to_string(c.drive_method) +
+                  " is not a CiA 402 homing method (0x6098) contourd supports: 17/18 limit switch, "
+                  "19..22 home switch, 33/34 index, 35/37 current position");
+    }
+    const bool moves = c.drive_method != 35 && c.drive_method != 37;
+    // The drive's speeds: magnitudes (the method decides the direction); 0 only without motion.
+    c.search_vel_mm_s = std::abs(h.number("search_vel_mm_min", moves ? 0.0 : 60.0, -vmax, vmax)) / 60.0;
+    c.latch_vel_mm_s = std::abs(h.number("latch_vel_mm_min", moves ? 0.0 : 60.0, -vmax, vmax)) / 60.0;
+    if (moves && c.search_vel_mm_s == 0.0) h.error("search_vel_mm_min", "required and not 0 for drive_method " + std::to_string(c.drive_method) + " (the drive's 0x6099:01)");
+    if (moves && c.latch_vel_mm_s == 0.0) h.error("latch_vel_mm_min", "required and not 0 for drive_method " + std::to_string(c.drive_method) + " (the drive's 0x6099:02)");
+    if (c.latch_vel_mm_s > c.search_vel_mm_s) h.error("latch_vel_mm_min", "must not be faster than search_vel_mm_min");
+    c.drive_accel_mm_s2 = h.number("accel_mm_s2", std::min(500.0, ax.max_accel_mm_s2), 0.001, ax.max_accel_mm_s2);
+    c.drive_timeout_s = h.number("drive_timeout_s", 60.0, 0.1, 3600.0);
+    c.home_position_mm = h.number("home_position_mm", c.home_offset_mm, ax.min_mm, ax.max_mm);
+    if (h.boolean("use_index", false)) h.error("use_index", "method drive: choose an index method in drive_method (33/34) instead");
   } else {
     if (h.boolean("use_index", false)) h.error("use_index", "needs method switch (the index follows the switch)");
     // No motion: the axis is where its encoder says (absolute) or nowhere known (none).
@@ -49,6 +65,13 @@ void parse_home(Section& a, AxisConfig& ax) {
 }
 
 }  // namespace
+
+bool drive_method_supported(int method) noexcept {
+  for (const int m : kDriveMethods) {
+    if (m == method) return true;
+  }
+  return false;
+}
 
 MachineConfig parse_machine(Section& s, double period_s) {
   MachineConfig m;

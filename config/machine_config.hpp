@@ -31,6 +31,7 @@ struct HomeConfig {
     kNone,      // never homed: only with machine.allow_unhomed (the power-up position counts)
     kSwitch,    // the drive's home-switch input (CiA 402 0x60FD bit 2)
     kAbsolute,  // absolute encoder: machine position = encoder position + home_offset_mm
+    kDrive,     // the drive homes itself (CiA 402 homing mode 6, method 0x6098 = drive_method)
   };
   bool present = false;  // the axis has a home: section
   Method method = Method::kNone;
@@ -44,7 +45,25 @@ struct HomeConfig {
   // LinuxCNC's HOME_USE_INDEX (method switch): after the switch edge the axis goes on at the
   // latch speed to the encoder's next index pulse, whose position becomes home_offset_mm.
   bool use_index = false;
+  // method drive (CiA 402 homing mode 6): the drive's homing method (0x6098; the codes
+  // kDriveMethods lists), its speeds (0x6099:01 search for the switch = |search_vel_mm_s|,
+  // 0x6099:02 search for zero = |latch_vel_mm_s|; the method fixes the direction, so the signs
+  // do not matter) and acceleration (0x609A), in mm here, counts at the bus' edge. The point the
+  // drive homed to (where it reports position 0 afterwards) becomes home_offset_mm in machine
+  // coordinates, as the latch point of method switch; then the axis moves to home_position_mm.
+  // No "attained" within drive_timeout_s fails the homing.
+  int drive_method = 0;
+  double drive_accel_mm_s2 = 0.0;
+  double drive_timeout_s = 60.0;
 };
+
+// The CiA 402 homing methods (0x6098) `home.method: drive` accepts, the ones the simulated drives
+// (sim bus, contour-machine-sim) implement: 17/18 negative/positive limit switch (0x60FD bit 0/1,
+// home where it releases), 19/20 positive home switch and 21/22 negative home switch (bit 2;
+// 19/21 home where the switch opens leaving it, 20/22 where it closes entering it), 33/34 the next
+// encoder index below/above, 35 and 37 the current position.
+inline constexpr int kDriveMethods[] = {17, 18, 19, 20, 21, 22, 33, 34, 35, 37};
+[[nodiscard]] bool drive_method_supported(int method) noexcept;
 
 struct AxisConfig {
   std::string name;             // "X", "Y", "Z"

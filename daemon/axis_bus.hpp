@@ -19,6 +19,17 @@ inline constexpr int kMaxAxes = 3;
 
 enum class DriveMode : std::uint8_t { kDisabled, kEnabled, kQuickStop };
 
+// Homing by the drive (CiA 402 homing mode 6, home.method drive), as the bus reports it per axis.
+enum class DriveHoming : std::uint8_t {
+  kIdle,         // not requested (or the request dropped and the drive is back in cyclic mode)
+  kRunning,      // requested: the bus sets the drive up and the drive moves on its own
+  kAttained,     // done (statusword bits 12 + 10): the drive stands, is back in the cyclic mode
+                 // and its position 0 is the home point it found; holds while still requested
+  kError,        // the drive reported a homing error (statusword bit 13); holds while requested
+  kUnsupported,  // the drive refused the homing objects (SDO abort): detail = object
+};
+const char* to_string(DriveHoming h) noexcept;
+
 struct AxisFeedback {
   double position_mm = 0.0;
   double velocity_mm_s = 0.0;
@@ -49,6 +60,14 @@ struct AxisFeedback {
   bool index_present = false;
   bool index_latched = false;
   double index_position_mm = 0.0;
+  // Homing by the drive (AxisCommands::drive_home): `drive_homing_present`: this bus can ask the
+  // drive of this axis to home itself; `drive_homing`: where that stands. While it runs, the drive
+  // moves on its own (the velocity command is ignored) and position_mm follows it; at kAttained
+  // the drive's position reads 0 at its home point. `drive_homing_detail`: kUnsupported: the
+  // object refused, index << 8 | sub-index (e.g. 0x609800); kError: the statusword.
+  bool drive_homing_present = false;
+  DriveHoming drive_homing = DriveHoming::kIdle;
+  std::uint32_t drive_homing_detail = 0;
 };
 
 // The spindle drive on the same bus (CANopen bus.spindle, or the simulated machine's spindle).
@@ -82,6 +101,11 @@ struct AxisCommands {
   std::array<std::uint32_t, kMaxAxes> digital_output_mask{};
   // Arm the encoder index latch of the axis (AxisFeedback::index_latched); false disarms it.
   std::array<bool, kMaxAxes> index_arm{};
+  // Home the axis by its drive (CiA 402 mode 6 with the axis' home.drive_method, speeds and
+  // acceleration, given to the bus at construction): the rising edge starts it, holding it keeps
+  // the result (AxisFeedback::drive_homing), false returns the drive to the cyclic mode (an
+  // unfinished homing is abandoned: the drive stops under the velocity command).
+  std::array<bool, kMaxAxes> drive_home{};
 };
 
 class AxisBus {

@@ -1,5 +1,6 @@
 #include "daemon/canopen_bus.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <ctime>
@@ -84,6 +85,27 @@ void CanopenBus::init(const config::Config& cfg) {
   }
   ifname_ = cfg.bus.interface;
   period_ns_ = static_cast<std::int64_t>(cfg.loop.period_us) * 1000;
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    const config::AxisConfig& ax = axes[a];
+    max_step_counts_[a] = 2.0 * ax.max_velocity_mm_min / 60.0 * period_s_ * ax.counts_per_mm + 2.0;
+    const config::HomeConfig& h = ax.home;
+    if (h.method != config::HomeConfig::Method::kDrive) continue;
+    HomeSeq& q = home_[a];
+    q.configured = true;
+    const double cpm = ax.counts_per_mm;
+    auto u32 = [](double v) {
+      return static_cast<std::uint32_t>(std::clamp(std::llround(std::abs(v)), 0LL, 0x7FFFFFFFLL));
+    };
+    const auto cyclic = static_cast<std::uint8_t>(mcfg_.nodes[a].mode);
+    q.setup = {{{0x6098, 0, static_cast<std::uint8_t>(static_cast<std::int8_t>(h.drive_method)), 1},
+                {0x6099, 1, u32(h.search_vel_mm_s * cpm), 4},
+                {0x6099, 2, u32(h.latch_vel_mm_s * cpm), 4},
+                {0x609A, 0, u32(h.drive_accel_mm_s2 * cpm), 4},
+                {0x6060, 0, 6, 1},
+                {0x6061, 0, 6, 0}}};
+    q.back = {{{0x6060, 0, cyclic, 1}, {0x6061, 0, cyclic, 0}}};
+  }
 }
 
 void CanopenBus::start() {
@@ -211,10 +233,14 @@ void CanopenBus::read(BusFeedback& fb) noexcept {
         const double dt_s = lockstep_
                                 ? period_s_ * static_cast<double>(cycle_ - last_fresh_cycle_[i])
                                 : static_cast<double>(sync_ns_ - last_fresh_ns_[i]) * 1e-9;
-        f.velocity_mm_s =
-            have_last_[i] && dt_s > 0.0
-                ? co::counts_velocity_mm_s(r.position_counts - last_counts_[i], cpm, dt_s)
-                : 0.0;
+        const std::int64_t step = r.position_counts - last_counts_[i];
+        if (home_[i].step != HomeStep::kIdle && have_last_[i] &&
+            std::abs(static_cast<double>(step)) > max_step_counts_[i]) {
+          // The drive set its position at the home point: a reset, not motion (keep the last
+          // velocity; the next reading differences from the new position).
+        } else {
+          f.velocity_mm_s = have_last_[i] && dt_s > 0.0 ? co::counts_velocity_mm_s(step, cpm, dt_s) : 0.0;
+        }
         last_counts_[i] = r.position_counts;
         last_fresh_cycle_[i] = cycle_;
         last_fresh_ns_[i] = sync_ns_;
@@ -229,6 +255,16 @@ void CanopenBus::read(BusFeedback& fb) noexcept {
     f.emcy_code = r.emcy_code;
     f.nmt_lost = r.nmt_lost;
     f.enabled = r.state == co::Cia402State::kOperationEnabled;
+    const HomeSeq& q = home_[i];
+    f.drive_homing_present = q.configured;
+    f.drive_homing_detail = q.detail;
+    switch (q.step) {
+      case HomeStep::kIdle: f.drive_homing = DriveHoming::kIdle; break;
+      case HomeStep::kAttained: f.drive_homing = DriveHoming::kAttained; break;
+      case HomeStep::kError: f.drive_homing = DriveHoming::kError; break;
+      case HomeStep::kUnsupported: f.drive_homing = DriveHoming::kUnsupported; break;
+      default: f.drive_homing = DriveHoming::kRunning; break;
+    }
     // The drive's own fault state (a reboot behind our back is nmt_lost: the supervisor names it
     // as an NMT change, and a reset needs the node operational again).
     f.fault = r.state == co::Cia402State::kFault ||
@@ -263,9 +299,11 @@ void CanopenBus::write(const AxisCommands& cmd) noexcept {
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
     master_->set_request(a, req);
+    if (home_[a].configured) step_drive_homing(a, cmd.drive_home[a]);
     if (csp_[a]) {
       const co::NodeRuntime& r = master_->node(a);
-      if (r.state != co::Cia402State::kOperationEnabled || req != co::DriveRequest::kEnabled) {
+      if (r.state != co::Cia402State::kOperationEnabled || req != co::DriveRequest::kEnabled ||
+          home_[a].step != HomeStep::kIdle) {
         csp_target_counts_[a] = static_cast<double>(r.position_counts);
       } else if (std::isfinite(cmd.velocity_mm_s[a])) {
         csp_target_counts_[a] += cmd.velocity_mm_s[a] * counts_per_mm_[a] * period_s_;
@@ -287,6 +325,135 @@ void CanopenBus::write(const AxisCommands& cmd) noexcept {
     master_->set_target(s, co::mm_s_to_counts_s(rpm, 1.0));  // rounds and saturates
   }
   master_->send_rpdos();
+}
+
+// One cycle of the axis' homing by its drive (RT: no allocation, no blocking; one SDO frame at
+// most). The set-up and the way back to the cyclic mode are SDO transfers of the master's
+// non-blocking client; the start and the result go through the PDOs.
+void CanopenBus::step_drive_homing(std::size_t a, bool request) noexcept {
+  HomeSeq& q = home_[a];
+  const co::AsyncSdo& sdo = master_->sdo_async(a);
+  const co::NodeRuntime& r = master_->node(a);
+  // The object of the current SDO step: sends it once, then judges the answer. Returns true when
+  // it is done (and matches, for a read-back); false while in flight. A refusal or a time-out
+  // ends the sequence.
+  auto sdo_step = [&](const HomeObject& o, bool& failed, bool& refused) {
+    failed = refused = false;
+    if (!q.sent) {
+      if (sdo.state == co::AsyncSdo::State::kBusy) return false;  // (an earlier transfer)
+      q.sent = o.bytes == 0 ? master_->sdo_async_upload(a, o.index, o.sub)
+                            : master_->sdo_async_download(a, o.index, o.sub, o.value, o.bytes);
+      return false;
+    }
+    switch (sdo.state) {
+      case co::AsyncSdo::State::kBusy:
+      case co::AsyncSdo::State::kIdle: return false;
+      case co::AsyncSdo::State::kDone:
+        master_->sdo_async_clear(a);
+        q.sent = false;
+        if (o.bytes == 0 && static_cast<std::int8_t>(sdo.value & 0xFFu) != static_cast<std::int8_t>(o.value)) {
+          refused = true;  // the mode was not taken
+          q.detail = static_cast<std::uint32_t>(o.index) << 8 | o.sub;
+        }
+        return !refused;
+      case co::AsyncSdo::State::kAborted:
+        refused = true;
+        q.detail = static_cast<std::uint32_t>(o.index) << 8 | o.sub;
+        break;
+      case co::AsyncSdo::State::kTimedOut:
+        failed = true;
+        q.detail = static_cast<std::uint32_t>(o.index) << 8 | o.sub;
+        break;
+    }
+    master_->sdo_async_clear(a);
+    q.sent = false;
+    return false;
+  };
+  auto leave_mode6 = [&](HomeStep then) {
+    master_->set_controlword_extra(a, 0);
+    if (q.mode6) {
+      q.step = HomeStep::kModeBack;
+      q.result = then;
+      q.k = 0;
+    } else {
+      q.step = then;
+    }
+  };
+  bool failed = false, refused = false;
+  if (!request && q.step != HomeStep::kIdle && q.step != HomeStep::kModeBack) {
+    // The request dropped: back to the cyclic mode (if it was left), then idle.
+    if (q.sent && sdo.state == co::AsyncSdo::State::kBusy) return;  // let the transfer end
+    if (q.sent) {
+      master_->sdo_async_clear(a);
+      q.sent = false;
+    }
+    leave_mode6(HomeStep::kIdle);
+    if (q.step == HomeStep::kIdle) q.detail = 0;
+    return;
+  }
+  switch (q.step) {
+    case HomeStep::kIdle:
+      if (!request) return;
+      {
+        HomeSeq fresh;  // a new run: everything but the configuration starts afresh
+        fresh.configured = q.configured;
+        fresh.setup = q.setup;
+        fresh.back = q.back;
+        q = fresh;
+      }
+      q.step = HomeStep::kSetup;
+      [[fallthrough]];
+    case HomeStep::kSetup:
+      if (sdo_step(q.setup[q.k], failed, refused)) {
+        if (q.setup[q.k].index == 0x6060) {
+          q.mode6 = true;
+          master_->set_rpdo_mode(a, 6);
+        }
+        if (++q.k == q.setup.size()) {
+          // Mode 6 confirmed: the rising edge of bit 4 starts the homing. The statusword is
+          // judged from the third TPDO on: the RPDO sent now acts at the next SYNC and a drive
+          // sampling at SYNC reports it one SYNC later.
+          master_->set_controlword_extra(a, 0x0010);
+          q.step = HomeStep::kStartEdge;
+          q.wait = 3;
+        }
+      } else if (refused) {
+        leave_mode6(HomeStep::kUnsupported);
+      } else if (failed) {
+        leave_mode6(HomeStep::kError);
+      }
+      break;
+    case HomeStep::kStartEdge:
+      if (--q.wait <= 0) q.step = HomeStep::kRunning;
+      break;
+    case HomeStep::kRunning:
+      if (!r.tpdo_fresh) break;
+      if ((r.statusword & 0x2000u) != 0 || r.state != co::Cia402State::kOperationEnabled) {
+        q.detail = r.statusword;
+        leave_mode6(HomeStep::kError);
+      } else if ((r.statusword & 0x1400u) == 0x1400u) {
+        leave_mode6(HomeStep::kAttained);
+      }
+      break;
+    case HomeStep::kModeBack:
+      if (sdo_step(q.back[q.k], failed, refused)) {
+        if (q.back[q.k].index == 0x6060) master_->set_rpdo_mode(a, 0);
+        if (++q.k == q.back.size()) {
+          q.mode6 = false;
+          q.step = request ? q.result : HomeStep::kIdle;
+        }
+      } else if (refused || failed) {
+        // The drive stays in homing mode: it will not follow the velocity target. Error.
+        master_->set_rpdo_mode(a, 0);
+        q.mode6 = false;
+        q.step = request ? HomeStep::kError : HomeStep::kIdle;
+      }
+      break;
+    case HomeStep::kAttained:
+    case HomeStep::kError:
+    case HomeStep::kUnsupported:
+      break;
+  }
 }
 
 bool CanopenBus::set_position(int /*axis*/, double /*position_mm*/) { return false; }

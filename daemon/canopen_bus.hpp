@@ -26,6 +26,15 @@
 //  - begin_cycle()/read()/write(): the RT cycle, noexcept, allocation-free, lock-free, no log.
 //    begin_cycle = SYNC (+ master heartbeat); read = collect TPDOs until all are in or the
 //    deadline; write = RPDOs. Budget: ~5 us per frame sent plus the TPDO wait.
+//  - Homing by the drive (AxisCommands::drive_home, home.method drive; drivers/README.md
+//    "Homing by the drive"): a per-axis state machine stepped in write(), every SDO through the
+//    master's non-blocking expedited client (one request frame per step, the answer consumed by
+//    the next cycles' receive path): 0x6098, 0x6099:01/02, 0x609A, 0x6060 = 6, 0x6061 read back;
+//    the rising edge of controlword bit 4; statusword bits 12 + 10 (attained) or 13 (error) from
+//    the TPDO; 0x6060 = the cyclic mode, 0x6061 read back; then kAttained. An abort on any of
+//    them is kUnsupported naming the object. While the drive homes its position step at the home
+//    point is not a velocity: the difference velocity holds its last value across a step larger
+//    than 2 x max_velocity x period (the unwrapper sees a step, not a wrap: < 2^31 counts).
 //  - Master events (EMCY with code and text, drive fault, heartbeat loss, missed-TPDO streak,
 //    unexpected boot-up, bus state) are moved by read() from the master's ring into an SPSC ring
 //    of fixed-size records; an event thread started by start() drains it every 20 ms, turns each
@@ -101,6 +110,33 @@ class CanopenBus final : public AxisBus {
 
  private:
   void init(const config::Config& cfg);
+  void step_drive_homing(std::size_t a, bool request) noexcept;
+
+  // Homing by the drive (see the header comment): the SDO writes of the set-up, per axis.
+  enum class HomeStep : std::uint8_t {
+    kIdle, kSetup, kStartEdge, kRunning, kModeBack, kAttained, kError, kUnsupported,
+  };
+  struct HomeObject {
+    std::uint16_t index = 0;
+    std::uint8_t sub = 0;
+    std::uint32_t value = 0;
+    std::uint8_t bytes = 0;  // 0: an upload of 0x6061 that must read `value`
+  };
+  static constexpr std::size_t kHomeSetupObjects = 6;
+  struct HomeSeq {
+    bool configured = false;  // machine.axes[].home.method drive
+    std::array<HomeObject, kHomeSetupObjects> setup{};
+    std::array<HomeObject, 2> back{};  // 0x6060 = cyclic mode, 0x6061 read back
+    HomeStep step = HomeStep::kIdle;
+    std::size_t k = 0;           // the object in flight (setup or back)
+    bool sent = false;           // its SDO request is out
+    bool mode6 = false;          // 0x6060 = 6 was written: the way out writes the cyclic mode
+    HomeStep result = HomeStep::kIdle;  // kModeBack: what follows (kAttained/kError/kIdle)
+    int wait = 0;
+    std::uint32_t detail = 0;
+  };
+  std::array<HomeSeq, kMaxAxes> home_{};
+  std::array<double, kMaxAxes> max_step_counts_{};  // position step that is a reset, not motion
   void run_cycles_for_stop() noexcept;
 
   Log log_;

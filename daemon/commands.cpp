@@ -6,14 +6,18 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <ctime>
 #include <filesystem>
 #include <limits>
 #include <thread>
 
+#include <cstdio>
+
 #include "daemon/command_table.hpp"
 #include "daemon/commands.hpp"
 #include "daemon/identify.hpp"
+#include "daemon/sim_bus.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/gains_check.hpp"
 
@@ -88,7 +92,22 @@ namespace {
 std::string homing_failure_status(const LoopStatus& st, const config::MachineConfig& m) {
   std::string t = homing_failure_text(st.homing_failure);
   const auto a = static_cast<std::size_t>(st.homing_failure_axis);
-  if (st.homing_failure_axis >= 0 && a < m.axes.size()) t = m.axes[a].name + ": " + t;
+  if (st.homing_failure_axis >= 0 && a < m.axes.size()) {
+    t = m.axes[a].name + ": " + t;
+    const auto v = static_cast<std::uint32_t>(st.homing_failure_value);
+    char buf[96];
+    if (st.homing_failure == 11) {
+      std::snprintf(buf, sizeof buf, " (node %d, object 0x%04X:%02X)", m.axes[a].node_id,
+                    static_cast<unsigned>(v >> 8), static_cast<unsigned>(v & 0xFFu));
+      t += buf;
+    } else if (st.homing_failure == 10) {
+      std::snprintf(buf, sizeof buf, " (node %d, statusword 0x%04X)", m.axes[a].node_id, static_cast<unsigned>(v));
+      t += buf;
+    } else if (st.homing_failure == 9) {
+      std::snprintf(buf, sizeof buf, " (%.1f s)", st.homing_failure_value);
+      t += buf;
+    }
+  }
   return t;
 }
 
@@ -232,6 +251,13 @@ json Daemon::status_json() {
       j["tool_change"] = {{"tool", at.line != 0 ? at.tool : st.hold_tool}, {"line", line},
                           {"message", msg}};
     }
+  }
+  // The in-process simulated machine only: where the plant really is (tests compare the machine
+  // position after homing with it; published at each SYNC).
+  if (const auto* sb = dynamic_cast<const SimBus*>(bus_.get())) {
+    json t = json::array();
+    for (int i = 0; i < axes; ++i) t.push_back(sb->published_true_position_mm(i));
+    j["sim_true_mm"] = t;
   }
   return j;
 }
@@ -718,10 +744,11 @@ json Daemon::cmd_home(const json& req) {
     names.push_back(ax.name);
   } else {
     for (const auto& ax : cfg_.machine.axes) {
-      if (ax.home.method == config::HomeConfig::Method::kSwitch) names.push_back(ax.name);
+      using M = config::HomeConfig::Method;
+      if (ax.home.method == M::kSwitch || ax.home.method == M::kDrive) names.push_back(ax.name);
     }
     if (names.empty()) {
-      throw CommandError("home: no axis has a homing method that moves (machine.axes[].home.method switch)");
+      throw CommandError("home: no axis has a homing method that moves (machine.axes[].home.method switch or drive)");
     }
   }
   loop_->post({CommandKind::kHome, axis, 0.0, 0.0});

@@ -167,6 +167,12 @@ std::string describe(const RtEvent& e) {
       if (e.axis >= 0) o << " axis " << e.axis;
       o << ": " << homing_failure_text(e.detail);
       if (e.detail == 2) o << " (" << e.value << " mm travelled)";
+      if (e.detail == 11) {
+        const auto v = static_cast<std::uint32_t>(e.value);
+        o << " (object 0x" << std::hex << std::uppercase << (v >> 8) << ":" << (v & 0xFFu) << std::dec
+          << std::nouppercase << ")";
+      }
+      if (e.detail == 10) o << " (statusword 0x" << std::hex << static_cast<std::uint32_t>(e.value) << std::dec << ")";
       break;
     case EventKind::kStandstillTimeout:
       o << "STANDSTILL TIMEOUT: axis " << e.axis << " still ";

@@ -215,6 +215,19 @@ const char* to_string(HomingSource::Phase p) noexcept {
     case HomingSource::Phase::kDone: return "done";
     case HomingSource::Phase::kBraking: return "braking";
     case HomingSource::Phase::kIndex: return "index";
+    case HomingSource::Phase::kDrive: return "drive";
+    case HomingSource::Phase::kDriveStop: return "drive_stop";
+  }
+  return "?";
+}
+
+const char* to_string(DriveHoming h) noexcept {
+  switch (h) {
+    case DriveHoming::kIdle: return "idle";
+    case DriveHoming::kRunning: return "running";
+    case DriveHoming::kAttained: return "attained";
+    case DriveHoming::kError: return "error";
+    case DriveHoming::kUnsupported: return "unsupported";
   }
   return "?";
 }
@@ -229,6 +242,14 @@ const char* homing_failure_text(std::uint8_t code) noexcept {
       return "home.use_index, but this bus cannot latch the axis' encoder index (the CANopen master "
              "does not map the touch probe 0x60B8-0x60BA; simulated machine: sim.index_pitch_mm)";
     case 7: return "no encoder index within search_distance_mm after the home switch";
+    case 8:
+      return "home.method drive, but this bus cannot ask the drive to home itself (CiA 402 homing "
+             "mode 6)";
+    case 9: return "the drive did not report homing attained within home.drive_timeout_s";
+    case 10: return "the drive reported a homing error (CiA 402 statusword bit 13)";
+    case 11:
+      return "the drive refused a homing object (SDO abort): it does not support CiA 402 homing "
+             "mode 6 (use home.method switch)";
     default: return "aborted (stop, or the machine left READY) before every axis latched";
   }
 }
@@ -270,9 +291,10 @@ void HomingSource::start_group() noexcept {
     const auto a = static_cast<std::size_t>(i);
     if ((homing_mask_ >> i & 1u) == 0 || phase_[a] == Phase::kDone || plan_[a].sequence != next) continue;
     group_mask_ |= 1u << i;
-    phase_[a] = Phase::kSearch;
+    phase_[a] = plan_[a].drive ? Phase::kDrive : Phase::kSearch;
     start_mm_[a] = pos_mm_[i];
     v_[a] = 0.0;
+    drive_s_[a] = 0.0;
   }
 }
 
@@ -290,7 +312,11 @@ void HomingSource::abort() noexcept {
   shift_pending_ = false;
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
-    if (phase_[a] != Phase::kIdle && phase_[a] != Phase::kDone) phase_[a] = Phase::kBraking;
+    if (phase_[a] == Phase::kDrive || phase_[a] == Phase::kDriveStop) {
+      phase_[a] = Phase::kDriveStop;  // the drive stops on its own: follow it to rest
+    } else if (phase_[a] != Phase::kIdle && phase_[a] != Phase::kDone) {
+      phase_[a] = Phase::kBraking;
+    }
   }
 }
 
@@ -410,6 +436,7 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
         if (v_[a] == 0.0) phase_[a] = Phase::kLatched;
         break;
       case Phase::kLatched:
+        if (p.drive) pos_mm_[i] = fb.act_mm[i];  // not servoed until the shift (drive_moves)
         break;
       case Phase::kFinal: {
         // Trapezoid to home_position_mm at the search speed and the axis' acceleration.
@@ -428,6 +455,37 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
         }
         break;
       }
+      case Phase::kDrive:
+        // The drive homes itself (the bus drives mode 6 while drive_home_request()): the
+        // reference is where the axis is, so the controllers and the following-error rule see no
+        // error for motion the loop does not command (ServoLoop commands 0 on this axis).
+        pos_mm_[i] = fb.act_mm[i];
+        v_[a] = 0.0;
+        drive_s_[a] += period_s;
+        if (!ax.drive_homing_present) {
+          fail(i, 8, 0.0);
+        } else if (ax.drive_homing == DriveHoming::kUnsupported) {
+          fail(i, 11, static_cast<double>(ax.drive_homing_detail));
+        } else if (ax.drive_homing == DriveHoming::kError) {
+          fail(i, 10, static_cast<double>(ax.drive_homing_detail));
+        } else if (ax.drive_homing == DriveHoming::kAttained) {
+          // The drive stands and reads 0 at its home point: that point in the loop's coordinates
+          // (act - bus position is the present home shift) is the latch.
+          latch_mm_[a] = fb.act_mm[i] - ax.position_mm;
+          phase_[a] = Phase::kLatched;
+        } else if (drive_s_[a] > p.drive_timeout_s) {
+          fail(i, 9, drive_s_[a]);
+        }
+        break;
+      case Phase::kDriveStop:
+        // Abandoned: the request is gone, the bus takes the drive back to the cyclic mode and the
+        // zero velocity command stops it; the reference follows until it stands.
+        pos_mm_[i] = fb.act_mm[i];
+        v_[a] = 0.0;
+        if (ax.drive_homing != DriveHoming::kRunning && ax.fresh && std::abs(ax.velocity_mm_s) < kDriveRestMmS) {
+          phase_[a] = Phase::kIdle;
+        }
+        break;
       case Phase::kBraking:
         ramp(a, 0.0, acc, period_s);
         if (v_[a] == 0.0) phase_[a] = Phase::kIdle;
@@ -445,7 +503,7 @@ RefPoint HomingSource::step(const Feedback& fb, const LiveLimits& lim, double pe
   bool group_idle = false;  // an axis of the group braked to rest: aborted or failed
   for (int i = 0; i < axes_; ++i) {
     const Phase ph = phase_[static_cast<std::size_t>(i)];
-    braking = braking || ph == Phase::kBraking;
+    braking = braking || ph == Phase::kBraking || ph == Phase::kDriveStop;
     group_idle = group_idle || ((group_mask_ >> i & 1u) != 0 && ph == Phase::kIdle);
   }
   if (braking) {

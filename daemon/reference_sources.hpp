@@ -160,6 +160,8 @@ class HomingSource {
     kIdle, kSearch, kBrakeSearch, kBackoff, kBrakeBackoff, kApproach, kBrakeLatch, kLatched,
     kFinal, kDone, kBraking /* abort or failure */,
     kIndex /* past the switch edge at the latch speed, waiting for the encoder index */,
+    kDrive /* home.method drive: the drive homes itself (mode 6), the reference follows it */,
+    kDriveStop /* a drive homing abandoned: following the drive while it stops */,
   };
   struct AxisPlan {
     bool home = false;  // this axis is homed by this run
@@ -170,6 +172,10 @@ class HomingSource {
     double position_mm = 0.0;
     double search_distance_mm = 0.0;
     bool use_index = false;  // home.use_index: the index after the switch edge is the latch
+    // home.method drive: the drive homes itself (the bus was given method, speeds, acceleration);
+    // no "attained" within drive_timeout_s fails the homing (code 9).
+    bool drive = false;
+    double drive_timeout_s = 60.0;
   };
   static constexpr std::uint32_t kHomeSwitchBit = 1u << 2;  // CiA 402 0x60FD bit 2
 
@@ -198,10 +204,38 @@ class HomingSource {
   [[nodiscard]] bool index_armed(int axis) const noexcept {
     return active_ && phase_[static_cast<std::size_t>(axis)] == Phase::kIndex;
   }
+  // Home by the drive (AxisCommands::drive_home) this cycle: the kDrive phase, until the drive
+  // reports attained (then it stands in the cyclic mode and the loop holds it like a latched
+  // switch axis until the group's shift).
+  [[nodiscard]] bool drive_home_request(int axis) const noexcept {
+    return active_ && phase_[static_cast<std::size_t>(axis)] == Phase::kDrive;
+  }
+  // The drive moves the axis on its own (kDrive, kDriveStop): the reference follows the measured
+  // position (no following error for motion the loop did not command) and the loop commands no
+  // velocity on this axis.
+  // From "attained" to the group's shift the drive-homed axis stays so (kLatched): its drive
+  // holds it at rest under the zero command, and the controllers, whose drive model missed the
+  // whole homing travel, restart only at the shift (ServoLoop::homing_step).
+  [[nodiscard]] bool drive_moves(int axis) const noexcept {
+    const auto a = static_cast<std::size_t>(axis);
+    const Phase p = phase_[a];
+    return active_ && (p == Phase::kDrive || p == Phase::kDriveStop || (p == Phase::kLatched && plan_[a].drive));
+  }
+  // The current sequence group has an axis homed by its drive (the loop keeps the controllers'
+  // axes apart while it runs: ServoLoop::control_step).
+  [[nodiscard]] bool drive_group() const noexcept {
+    if (!active_) return false;
+    for (int i = 0; i < axes_; ++i) {
+      if ((group_mask_ >> i & 1u) != 0 && plan_[static_cast<std::size_t>(i)].drive) return true;
+    }
+    return false;
+  }
   // Axes that finished (moved to home_position_mm) since start(); the loop marks them homed at the shift.
   [[nodiscard]] std::uint32_t homing_mask() const noexcept { return homing_mask_; }
 
  private:
+  // kDriveStop ends when the axis moves slower than this (fresh feedback, mm/s).
+  static constexpr double kDriveRestMmS = 0.5;
   void start_group() noexcept;
   void fail(int axis, std::uint8_t code, double value) noexcept;
   // One velocity-ramp step of axis a towards v_target; returns the new velocity.
@@ -213,6 +247,7 @@ class HomingSource {
   std::array<double, kMaxAxes> start_mm_{};  // where the current phase began (distance bound)
   std::array<double, kMaxAxes> latch_mm_{};
   std::array<double, kMaxAxes> index_v_{};  // kIndex: the speed the switch edge was met at
+  std::array<double, kMaxAxes> drive_s_{};  // kDrive: time since the request
   Eigen::Vector3d pos_mm_ = Eigen::Vector3d::Zero();
   int axes_ = 0;
   int group_ = -1;                 // current sequence number
@@ -228,8 +263,11 @@ const char* to_string(HomingSource::Phase p) noexcept;
 // Why homing ended without homing (the log, status.homing.failure): 1 no digital inputs, 2 the
 // switch did not close within search_distance_mm, 3 did not open again, 4 did not close again on
 // the latch approach, 6 home.use_index on a bus that cannot latch the index, 7 no index within
-// search_distance_mm after the switch edge, anything else aborted (the loop's code 5: stop, or
-// the machine left READY).
+// search_distance_mm after the switch edge, 8 home.method drive on a bus that cannot ask the drive
+// to home, 9 no "homing attained" within drive_timeout_s, 10 the drive reported a homing error
+// (statusword bit 13; value = statusword), 11 the drive refused a homing object (SDO abort; value =
+// index << 8 | sub-index), anything else aborted (the loop's code 5: stop, or the machine left
+// READY).
 const char* homing_failure_text(std::uint8_t code) noexcept;
 
 // Standstill. Servoing (READY): the reference stays at the position given to start(). Not

@@ -262,6 +262,13 @@ void ServoLoop::cancel_homing() noexcept {
 
 RefPoint ServoLoop::homing_step() noexcept {
   RefPoint r = homing_.step(fb_, limits_, period_s_);
+  homing_drive_ = homing_drive_ || homing_.drive_group();
+  for (int i = 0; i < axes_; ++i) {
+    // The drive moves the axis itself and the reference follows the measurement: the reference
+    // speed is the measured one, also across the jump of the drive's position at "attained" (the
+    // following-error band and a stop's start velocity see the real motion, never a spike).
+    if (homing_.drive_moves(i)) ref_prev_[i] = r.position_mm[i] - v_est_[static_cast<std::size_t>(i)] * period_s_;
+  }
   if (homing_.shift_pending()) {
     // The group latched and stands: its machine coordinates move so that each latch point reads
     // home_offset_mm. Reference, measurement and the previous reference move together (no
@@ -282,12 +289,23 @@ RefPoint ServoLoop::homing_step() noexcept {
     model_.reset();
     v_cmd_.fill(0.0);
     homing_.shifted(r.position_mm);
+    homing_drive_ = false;  // restarted from rest just now
     limits_eff_dirty_ = true;
   }
   if (!homing_.active()) {
+    if (homing_drive_) {
+      // A drive homed an axis without the loop's command and the homing ended without a shift
+      // (failure, stop): the controllers' drive models missed that travel; restart from rest
+      // where the axes stand (every axis of the group does by now).
+      ctrl_.reset();
+      model_.reset();
+      v_cmd_.fill(0.0);
+      homing_drive_ = false;
+    }
     if (homing_.failed()) {
       homing_failure_ = homing_.failure_code();
       homing_failure_axis_ = homing_.failed_axis();
+      homing_failure_value_ = homing_.failure_value();
       emit(EventKind::kHomingFailed, FaultCause::kNone, homing_.failed_axis(), homing_.failure_value(),
            0.0, homing_.failure_code());
     } else if (homing_was_active_ && homing_.homing_mask() != 0) {
@@ -461,9 +479,13 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       for (int i = 0; i < axes_; ++i) {
         const auto a = static_cast<std::size_t>(i);
         const config::HomeConfig& h = cfg_.machine.axes[a].home;
-        if (h.method != config::HomeConfig::Method::kSwitch || (c.axis >= 0 && c.axis != i)) continue;
+        using M = config::HomeConfig::Method;
+        if ((h.method != M::kSwitch && h.method != M::kDrive) || (c.axis >= 0 && c.axis != i)) continue;
         plan[a] = {true, h.sequence, h.search_vel_mm_s, h.latch_vel_mm_s, h.home_offset_mm,
-                   h.home_position_mm, h.search_distance_mm, h.use_index};
+                   h.home_position_mm, h.search_distance_mm, h.use_index,
+                   h.method == M::kDrive, h.drive_timeout_s};
+        // The final move of a drive-homed axis runs at its search speed (as method switch).
+        if (h.method == M::kDrive && !(plan[a].search_mm_s > 0.0)) plan[a].search_mm_s = limits_.max_velocity_mm_s[a];
         any = true;
       }
       if (!any) {
@@ -918,6 +940,19 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
       // final move made the soft Table 1 loop ring into a following-error fault). The axis
       // controllers alone track the homing reference.
       ce.eps.setZero();
+      if (homing_.drive_group()) {
+        // An axis homed by its drive moves without the loop's command, so its drive model (the
+        // Smith predictor, the derivative's model blend) is off by the whole travel until the
+        // shift restarts the controllers. The coupling derivative differences positions on the
+        // path's geometry, which mixes the axes: that error reached the other axis of the group
+        // and made its switch search ring into a following-error fault (Y, 1.5 mm, on the sim
+        // machine). A point geometry at P_hat keeps every axis to its own terms.
+        const control::Vec3 k = p_hat;
+        ce = control::ContourErrorResult{};
+        ce.k_point = k;
+        ce.branch = control::ContourBranch::kPoint;
+        ce.lag_points = 1 << 20;
+      }
     }
     eps_ = ce.eps;
     eps_norm = ce.eps.norm();
@@ -926,6 +961,13 @@ AxisCommands ServoLoop::control_step(const RefPoint& r, MachineState st, bool se
     clamped_.fill(false);
     for (int i = 0; i < axes_; ++i) {
       const auto a = static_cast<std::size_t>(i);
+      if (r.source == SourceKind::kHoming && homing_.drive_moves(i)) {
+        // The drive homes itself (mode 6 ignores the velocity target): command rest, so that the
+        // drive stands when the bus returns it to the cyclic mode, and the clamps, the chatter
+        // watchdog and the missed-TPDO model see no command the loop did not mean.
+        v_cmd_[a] = 0.0;
+        continue;
+      }
       double v = gain_per_s_[a] * u[i];
       if (!std::isfinite(v)) v = 0.0;
       const double vmax = limits_.max_velocity_mm_s[a];
@@ -1063,7 +1105,10 @@ void ServoLoop::channels(MachineState st, AxisCommands& out) noexcept {
 
 void ServoLoop::write(const AxisCommands& out) noexcept {
   out_ = out;
-  for (int i = 0; i < axes_; ++i) out_.index_arm[static_cast<std::size_t>(i)] = homing_.index_armed(i);
+  for (int i = 0; i < axes_; ++i) {
+    out_.index_arm[static_cast<std::size_t>(i)] = homing_.index_armed(i);
+    out_.drive_home[static_cast<std::size_t>(i)] = homing_.drive_home_request(i);
+  }
   // The PLC's CiA 402 outputs (0x60FE:01), computed in this cycle's scan, written with the
   // commands: the field sees the scan's end value only.
   if (plc_ != nullptr) {
@@ -1201,6 +1246,7 @@ void ServoLoop::publish() noexcept {
   pub_.homing_runs = homing_runs_;
   pub_.homing_failure = homing_failure_;
   pub_.homing_failure_axis = homing_failure_axis_;
+  pub_.homing_failure_value = homing_failure_value_;
   pub_.homed_mask = 0;
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);

@@ -107,7 +107,8 @@ enum class EventKind : std::uint8_t {
                        // (control::ChatterFigureKind: 1 command chatter mm/s, 2 clamped cycles/s)
   kHomed,          // axis homed: value = latch position before the shift (mm), limit = home_offset_mm
   kHomingFailed,   // axis, value = travelled mm; detail 1 no switch input, 2 switch never closed,
-                   // 3 never opened, 4 never closed on the latch approach, 5 aborted (stop / state)
+                   // 3 never opened, 4 never closed on the latch approach, 5 aborted (stop / state),
+                   // 6..11 homing_failure_text (8..11 home.method drive)
 };
 
 // Fixed-size event record (RT -> logger thread).
@@ -199,6 +200,7 @@ struct LoopStatus {
   std::uint64_t homing_runs = 0;      // `home` commands the loop accepted
   std::uint8_t homing_failure = 0;    // of the last run: 0 none, else kHomingFailed's detail
   int homing_failure_axis = -1;
+  double homing_failure_value = 0.0;  // kHomingFailed's value (11: the object, index << 8 | sub)
   bool interp_holding = false;      // M0/M1/M6 hold in the program
   bool hold_single_block = false;   // while interp_holding: a single-block stop, not a marker
   int hold_line = 0;                // while interp_holding: the hold's source line,
@@ -404,6 +406,8 @@ class ServoLoop {
   std::uint64_t homing_runs_ = 0;
   std::uint8_t homing_failure_ = 0;
   int homing_failure_axis_ = -1;
+  double homing_failure_value_ = 0.0;
+  bool homing_drive_ = false;  // a drive-homed group ran since the last controller restart
   LiveLimits limits_eff_{};
   bool limits_eff_dirty_ = true;  // recomputed at the next reference stage (swap, homing change)
   StopSource stop_;

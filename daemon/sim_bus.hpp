@@ -69,6 +69,10 @@ class SimBus final : public AxisBus {
   [[nodiscard]] double true_position_mm(int axis) const noexcept {
     return drive_[static_cast<std::size_t>(axis)].position_mm();
   }
+  // The same, published at each SYNC for other threads (status.sim_true_mm; relaxed atomics).
+  [[nodiscard]] double published_true_position_mm(int axis) const noexcept {
+    return true_pub_[static_cast<std::size_t>(axis)].load(std::memory_order_relaxed);
+  }
   void clear_input_switches() noexcept;
   // Encoder index (setup-time only): one pulse per `pitch_mm` of true travel, at true positions
   // phase_mm + k * pitch_mm (a rotary encoder on the motor of a ball screw); pitch 0 = none.
@@ -86,6 +90,25 @@ class SimBus final : public AxisBus {
   }
   // The mode of the last write() (what the RPDOs of this cycle asked for).
   [[nodiscard]] DriveMode written_mode() const noexcept { return received_mode_; }
+
+  // Homing by the drive (CiA 402 homing mode 6, AxisCommands::drive_home): the simulated drive
+  // homes itself with `method` (0x6098; config::kDriveMethods), searching at search_mm_s
+  // (0x6099:01), latching at latch_mm_s (0x6099:02), with accel_mm_s2 (0x609A) on its profile,
+  // on the switches of add_input_switch (bit 0 negative limit, 1 positive limit, 2 home) and the
+  // encoder index of set_encoder_index. Like a drive it samples the switch each cycle on the true
+  // position; at the home point its encoder is set to read 0 there; it brakes, and reports
+  // attained once it stands. Running into the limit switch of its direction of travel that is not
+  // its target is a homing error (statusword bit 13). Setup-time only; every axis of a SimBus
+  // can home by drive (method 0 = none configured: a request fails as a homing error).
+  struct DriveHomingParams {
+    int method = 0;
+    double search_mm_s = 0.0;  // magnitudes
+    double latch_mm_s = 0.0;
+    double accel_mm_s2 = 500.0;
+  };
+  void configure_drive_homing(int axis, const DriveHomingParams& p);
+  // A drive without homing support (tests): a request answers kUnsupported, object 0x6098:00.
+  void set_drive_homing_supported(int axis, bool supported);
 
  private:
   int axes_ = 0;
@@ -127,6 +150,24 @@ class SimBus final : public AxisBus {
   std::array<std::atomic<std::uint32_t>, kMaxAxes> di_force_values_{};
   std::array<std::uint32_t, kMaxAxes> do_received_{};
   std::array<std::uint32_t, kMaxAxes> do_latched_{};
+
+  // Homing by the drive (mode 6), stepped at SYNC (begin_cycle).
+  enum class HomeStage : std::uint8_t {
+    kIdle, kSearch, kAway, kApproach, kIndex, kBrake, kAttained, kError,
+  };
+  [[nodiscard]] std::uint32_t inputs_at(std::size_t a, double x_true) const noexcept;
+  void step_drive_homing(std::size_t a) noexcept;
+  void home_here(std::size_t a, double x_true) noexcept;  // the home point: encoder reads 0
+  std::array<DriveHomingParams, kMaxAxes> home_params_{};
+  std::array<bool, kMaxAxes> home_supported_{true, true, true};
+  std::array<bool, kMaxAxes> home_received_{};  // AxisCommands::drive_home of the last write()
+  std::array<bool, kMaxAxes> home_latched_{};   // as the drive acts on it (from the next SYNC)
+  std::array<HomeStage, kMaxAxes> home_stage_{};
+  std::array<HomeStage, kMaxAxes> home_after_brake_{};
+  std::array<double, kMaxAxes> home_v_{};        // the drive's profile velocity, mm/s
+  std::array<double, kMaxAxes> home_prev_x_{};   // true position at the previous step (index)
+  std::array<bool, kMaxAxes> home_rezeroed_{};   // the encoder jumped: CAN velocity restarts
+  std::array<std::atomic<double>, kMaxAxes> true_pub_{};
 };
 
 // The simulated drives' default switches (make_sim_bus and the daemon's sim bus): per axis,

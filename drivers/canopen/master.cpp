@@ -593,8 +593,8 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
     push_event({MasterEvent::Kind::kEmcy, n, e->code, e->error_register, counters_.cycles});
     return;
   }
-  if (node_of(id, kCobSdoTx) != 0) {
-    ++counters_.late_or_stray_frames;
+  if (std::uint8_t n = node_of(id, kCobSdoTx); n != 0) {
+    if (!sdo_async_response(n, f)) ++counters_.late_or_stray_frames;
     return;
   }
   if (id == kCobSync || id == kCobNmt || id == kCobHeartbeat + cfg_.master_node_id) return;
@@ -688,6 +688,9 @@ CycleStatus Master::collect() noexcept {
       push_event({MasterEvent::Kind::kHeartbeatLost, n.node_id, 0, 0, counters_.cycles});
     }
     if (r.faults != 0) fault = true;
+    if (r.sdo.state == AsyncSdo::State::kBusy && --r.sdo.cycles_left <= 0) {
+      r.sdo.state = AsyncSdo::State::kTimedOut;
+    }
   }
   if (bus_.bus_state() == BusState::kBusOff) fault = true;
   return fault ? CycleStatus::kFault : CycleStatus::kOk;
@@ -702,6 +705,8 @@ CycleStatus Master::send_rpdos() noexcept {
     if (n.sync_every > 1 && cycle % n.sync_every != 0) continue;
     const bool allow_reset = fault_reset_;
     r.controlword = seq_[i].next(r.state, r.request, allow_reset);
+    if (r.state == Cia402State::kOperationEnabled && r.request == DriveRequest::kEnabled)
+      r.controlword = static_cast<std::uint16_t>(r.controlword | r.controlword_extra);
     // Before and while enabling the drive must not jump: CSV/PV target 0, CSP target = actual.
     std::int32_t target = r.target;
     if (r.state != Cia402State::kOperationEnabled || r.request != DriveRequest::kEnabled)
@@ -711,7 +716,8 @@ CycleStatus Master::send_rpdos() noexcept {
       const auto idx = n.rpdo.entries[k].index;
       if (idx == 0x6040) v[k] = r.controlword;
       else if (idx == 0x60FF || idx == 0x607A) v[k] = static_cast<std::uint32_t>(target);
-      else if (idx == 0x6060) v[k] = static_cast<std::uint8_t>(n.mode);
+      else if (idx == 0x6060)
+        v[k] = static_cast<std::uint8_t>(r.rpdo_mode != 0 ? r.rpdo_mode : static_cast<std::int8_t>(n.mode));
     }
     CanFrame f;
     f.id = kCobRpdo[0] + n.node_id;
@@ -743,6 +749,82 @@ CycleStatus Master::send_rpdos() noexcept {
     if (!any) fault_reset_ = false;
   }
   return err ? CycleStatus::kFault : CycleStatus::kOk;
+}
+
+// ------------------------------------------------------------------ RT expedited SDO
+bool Master::sdo_async_download(std::size_t i, std::uint16_t index, std::uint8_t sub,
+                                std::uint32_t value, std::uint8_t bytes) noexcept {
+  AsyncSdo& a = rt_[i].sdo;
+  if (a.state == AsyncSdo::State::kBusy || bytes < 1 || bytes > 4) return false;
+  a = AsyncSdo{};
+  a.upload = false;
+  a.index = index;
+  a.sub = sub;
+  a.value = bytes == 4 ? value : value & ((1u << (8u * bytes)) - 1u);
+  CanFrame f;
+  f.id = kCobSdoRx + cfg_.nodes[i].node_id;
+  f.dlc = 8;
+  // Expedited download, size indicated: 0x23 | (4 - bytes) << 2.
+  f.data[0] = static_cast<std::uint8_t>(0x23u | ((4u - bytes) << 2));
+  put_u16(&f.data[1], index);
+  f.data[3] = sub;
+  put_u32(&f.data[4], a.value);
+  if (bus_.send(f) != SendResult::kOk) return false;
+  a.state = AsyncSdo::State::kBusy;
+  a.cycles_left = std::max(1, static_cast<int>(static_cast<std::int64_t>(cfg_.sdo_timeout_ms) * 1000 /
+                                               std::max<std::uint32_t>(1u, cfg_.period_us)));
+  return true;
+}
+
+bool Master::sdo_async_upload(std::size_t i, std::uint16_t index, std::uint8_t sub) noexcept {
+  AsyncSdo& a = rt_[i].sdo;
+  if (a.state == AsyncSdo::State::kBusy) return false;
+  a = AsyncSdo{};
+  a.upload = true;
+  a.index = index;
+  a.sub = sub;
+  CanFrame f;
+  f.id = kCobSdoRx + cfg_.nodes[i].node_id;
+  f.dlc = 8;
+  f.data[0] = 0x40;  // initiate upload
+  put_u16(&f.data[1], index);
+  f.data[3] = sub;
+  if (bus_.send(f) != SendResult::kOk) return false;
+  a.state = AsyncSdo::State::kBusy;
+  a.cycles_left = std::max(1, static_cast<int>(static_cast<std::int64_t>(cfg_.sdo_timeout_ms) * 1000 /
+                                               std::max<std::uint32_t>(1u, cfg_.period_us)));
+  return true;
+}
+
+// A server response to node n's async transfer (true: consumed).
+bool Master::sdo_async_response(std::uint8_t node, const CanFrame& f) noexcept {
+  const int k = index_of(node);
+  if (k < 0 || f.dlc != 8) return false;
+  AsyncSdo& a = rt_[static_cast<std::size_t>(k)].sdo;
+  if (a.state != AsyncSdo::State::kBusy) return false;
+  if (get_u16(&f.data[1]) != a.index || f.data[3] != a.sub) return false;
+  const std::uint8_t cs = f.data[0];
+  if (cs == 0x80) {
+    a.abort_code = get_u32(&f.data[4]);
+    a.state = AsyncSdo::State::kAborted;
+  } else if (!a.upload && cs == 0x60) {
+    a.state = AsyncSdo::State::kDone;
+  } else if (a.upload && (cs & 0xE0u) == 0x40u && (cs & 0x02u) != 0) {
+    // Expedited upload: bytes 4..7, of which 4 - n valid when size is indicated.
+    std::uint32_t v = get_u32(&f.data[4]);
+    if ((cs & 0x01u) != 0) {
+      const unsigned n = (cs >> 2) & 0x03u;
+      if (n > 0) v &= (1u << (8u * (4u - n))) - 1u;
+    }
+    a.value = v;
+    a.state = AsyncSdo::State::kDone;
+  } else {
+    // A segmented answer (or a wrong command): this client does expedited transfers only.
+    a.abort_code = 0x06010000;
+    a.state = AsyncSdo::State::kAborted;
+    (void)bus_.send(sdo_abort_frame(node, false, a.index, a.sub, a.abort_code));
+  }
+  return true;
 }
 
 void Master::set_request_all(DriveRequest r) noexcept {

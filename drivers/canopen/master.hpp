@@ -158,6 +158,20 @@ struct MasterEvent {
   std::uint64_t cycle = 0;
 };
 
+// A non-blocking expedited SDO transfer started from the RT cycle (Master::sdo_async_*): one per
+// node at a time; the response is consumed by the cycle's receive path, the timeout counted in
+// cycles (sdo_timeout_ms). Only expedited transfers (<= 4 bytes): no segmented protocol here.
+struct AsyncSdo {
+  enum class State : std::uint8_t { kIdle, kBusy, kDone, kAborted, kTimedOut };
+  State state = State::kIdle;
+  bool upload = false;
+  std::uint16_t index = 0;
+  std::uint8_t sub = 0;
+  std::uint32_t value = 0;       // download: written; upload: the value read (little-endian)
+  std::uint32_t abort_code = 0;  // kAborted: from the drive (or 0x06010000: a segmented answer)
+  std::int32_t cycles_left = 0;
+};
+
 struct NodeRuntime {
   Cia402State state = Cia402State::kUnknown;
   std::uint16_t statusword = 0;
@@ -186,6 +200,12 @@ struct NodeRuntime {
   bool digital_inputs_fresh = false;
   std::uint64_t digital_inputs_missed = 0;  // cycles TPDO2 was due and did not come
   std::uint32_t digital_outputs = 0;        // 0x60FE:01 sent in RPDO2 (masked)
+  // Operation-mode specific controlword bits (4..6, 8) OR'd into the controlword while the drive
+  // is in operation enabled and enable is requested (homing: bit 4 "homing operation start").
+  std::uint16_t controlword_extra = 0;
+  // 0x6060 sent in an RPDO that maps it (0: NodeSetup::mode), e.g. 6 while homing.
+  std::int8_t rpdo_mode = 0;
+  AsyncSdo sdo{};
 };
 
 struct MasterCounters {
@@ -239,6 +259,23 @@ class Master {
   // Test hook (HIL): stop/resume the master's own heartbeat (the drives consume it, 0x1016), to
   // prove the drives' reaction to a dead master without killing the process. RT-safe.
   void set_heartbeat_producer(bool on) noexcept { heartbeat_on_ = on; }
+  // Operation-mode specific controlword bits for node i (NodeRuntime::controlword_extra): only
+  // bits 4, 5, 6 and 8 are taken. RT-safe.
+  void set_controlword_extra(std::size_t i, std::uint16_t bits) noexcept {
+    rt_[i].controlword_extra = static_cast<std::uint16_t>(bits & 0x0170u);
+  }
+  void set_rpdo_mode(std::size_t i, std::int8_t mode) noexcept { rt_[i].rpdo_mode = mode; }
+  // Non-blocking expedited SDO from the RT cycle (AsyncSdo): sends the request now (one frame)
+  // and returns false when node i already has one in flight or the frame could not be queued.
+  // The result shows in sdo_async(i) after a later collect()/begin_cycle(); sdo_async_clear(i)
+  // makes the slot free again after kDone/kAborted/kTimedOut. `bytes` 1..4. RT-safe.
+  bool sdo_async_download(std::size_t i, std::uint16_t index, std::uint8_t sub, std::uint32_t value,
+                          std::uint8_t bytes) noexcept;
+  bool sdo_async_upload(std::size_t i, std::uint16_t index, std::uint8_t sub) noexcept;
+  [[nodiscard]] const AsyncSdo& sdo_async(std::size_t i) const noexcept { return rt_[i].sdo; }
+  void sdo_async_clear(std::size_t i) noexcept {
+    if (rt_[i].sdo.state != AsyncSdo::State::kBusy) rt_[i].sdo.state = AsyncSdo::State::kIdle;
+  }
   // Lets the sequencers send the fault-reset edge and clears the latched master-side faults.
   void reset_faults() noexcept;
 
@@ -258,6 +295,7 @@ class Master {
 
  private:
   void dispatch(const CanFrame& f, bool in_cycle) noexcept;
+  bool sdo_async_response(std::uint8_t node, const CanFrame& f) noexcept;
   void push_event(const MasterEvent& e) noexcept;
   void configure_node(const NodeSetup& n);
   // PDO `k` (0: PDO1) of a direction; then disable_pdos() switches off those from `from` on.

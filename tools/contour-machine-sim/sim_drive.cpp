@@ -91,6 +91,14 @@ void SimDrive::build_od() {
   rw(0x607A, 0, 0, 4);
   rw(0x60FF, 0, 0, 4);
   rw(0x6085, 0, 1000000, 4);
+  // Homing (mode 6): method, speeds (:01 search for switch, :02 search for zero), acceleration,
+  // home offset (counts the home point reads after homing).
+  rw(0x6098, 0, 0, 1);
+  ro(0x6099, 0, 2, 1);
+  rw(0x6099, 1, 0, 4);
+  rw(0x6099, 2, 0, 4);
+  rw(0x609A, 0, 0, 4);
+  rw(0x607C, 0, 0, 4);
   // CiA 402 digital inputs (limit/home switches, SimDriveSetup::switches) and outputs: 0x60FE:01
   // is what the master drives, :02 the mask of the bits it may drive (stored as written).
   ro(0x60FD, 0, 0, 4);
@@ -351,19 +359,29 @@ void SimDrive::sample_and_transmit() {
   // sample and transmit (values of the state reached by the last step)
   const std::int64_t pos_counts =
       s_.spindle ? std::llround(spindle_rev_ * s_.counts_per_mm)
-                 : std::llround(plant_.position_mm() * s_.counts_per_mm);
+                 : std::llround(plant_.position_mm() * s_.counts_per_mm) - pos_zero_counts_;
   set_int(0x6064, 0, static_cast<std::int32_t>(static_cast<std::uint32_t>(pos_counts & 0xFFFFFFFF)));
   set_int(0x606C, 0, s_.spindle ? std::llround(spindle_rpm_)
                                 : std::llround(plant_.velocity_mm_s() * s_.counts_per_mm));
   std::uint16_t sw = co::statusword_for(state_);
-  if (state_ == co::Cia402State::kOperationEnabled) sw |= 0x1000;  // follows the command
+  const bool homing_mode = !s_.spindle && static_cast<std::int8_t>(read_int(0x6061, 0)) == 6;
+  if (state_ == co::Cia402State::kOperationEnabled && homing_mode) {
+    // CiA 402 homing: 13 error, 12 attained, 10 target reached (stopped / not started).
+    const bool still = home_v_mm_s_ == 0.0;
+    switch (home_stage_) {
+      case HomeStage::kNotStarted:
+      case HomeStage::kInterrupted: sw |= 0x0400; break;
+      case HomeStage::kAttained: sw |= 0x1400; break;
+      case HomeStage::kError: sw |= still ? 0x2400 : 0x2000; break;
+      default: break;  // in progress
+    }
+  } else if (state_ == co::Cia402State::kOperationEnabled) {
+    sw |= 0x1000;  // follows the command
+  }
   set_int(0x6041, 0, sw);
   if (!s_.spindle) {
     std::uint32_t di = 0;
-    const double x = plant_.position_mm();
-    for (const auto& w : s_.switches)
-      if (w.bit >= 0 && w.bit < 32 && (w.on_above ? x > w.threshold_mm : x < w.threshold_mm))
-        di |= 1u << w.bit;
+    di = inputs_at(plant_.position_mm());
     set_int(0x60FD, 0, di);
   }
   const auto tx_type = read_int(0x1800, 2) & 0xFF;
@@ -475,9 +493,13 @@ void SimDrive::apply_and_step() {
   }
   switch (state_) {
     case co::Cia402State::kOperationEnabled:
-      if (mode == 8) {
+      if (mode == 6) {
+        step_homing(cw);
+        v_cmd_mm_s_ = home_v_mm_s_;
+        plant_.step_velocity(v_cmd_mm_s_);
+      } else if (mode == 8) {
         // CSP: the drive closes its own position loop; the plant command is the position error.
-        plant_.step(static_cast<double>(rx_target_) / s_.counts_per_mm - plant_.measured_mm());
+        plant_.step(static_cast<double>(rx_target_ + pos_zero_counts_) / s_.counts_per_mm - plant_.measured_mm());
         v_cmd_mm_s_ = plant_.velocity_mm_s();
       } else {
         v_cmd_mm_s_ = static_cast<double>(rx_target_) / s_.counts_per_mm;
@@ -498,6 +520,110 @@ void SimDrive::apply_and_step() {
       plant_.step(0.0);  // velocity loop holds zero speed (brake)
       break;
   }
+  if (state_ != co::Cia402State::kOperationEnabled || mode != 6) {
+    // Homing only runs in operation enabled, mode 6: anything else interrupts it.
+    if (home_stage_ != HomeStage::kNotStarted && home_stage_ != HomeStage::kAttained &&
+        home_stage_ != HomeStage::kError)
+      home_stage_ = HomeStage::kInterrupted;
+    home_v_mm_s_ = 0.0;
+  }
+}
+
+std::uint32_t SimDrive::inputs_at(double x) const {
+  std::uint32_t di = 0;
+  for (const auto& w : s_.switches)
+    if (w.bit >= 0 && w.bit < 32 && (w.on_above ? x > w.threshold_mm : x < w.threshold_mm))
+      di |= 1u << w.bit;
+  return di;
+}
+
+void SimDrive::home_here(double x_mm) {
+  // 0x6064 reads the home offset (0x607C) here from now on.
+  pos_zero_counts_ = std::llround(x_mm * s_.counts_per_mm) - static_cast<std::int32_t>(read_int(0x607C, 0));
+}
+
+// One period of homing mode 6 on the drive's own profile (0x609A), speeds 0x6099:01 (to the
+// switch) and :02 (off it / on to it slowly). Home is where the switch opens as the axis leaves it
+// (17, 18, 19, 21) or where it closes on the slow approach after backing off (20, 22); 35/37:
+// here. A limit switch ahead that is not the target is a homing error (the drive stops).
+void SimDrive::step_homing(std::uint16_t cw) {
+  const bool start = (cw & 0x10u) != 0 && (prev_cw_ & 0x10u) == 0;
+  const bool halt = (cw & 0x10u) == 0;
+  const double cpm = s_.counts_per_mm;
+  const double search = static_cast<double>(u32(0x6099, 1)) / cpm;
+  const double latch = static_cast<double>(u32(0x6099, 2)) / cpm;
+  const double acc = std::max(1.0, static_cast<double>(u32(0x609A, 0))) / cpm;
+  const int method = static_cast<int>(static_cast<std::int8_t>(read_int(0x6098, 0)));
+  const double x = plant_.position_mm();
+  if (start) {
+    home_v_mm_s_ = 0.0;
+    if (method == 35 || method == 37) {
+      home_here(x);
+      home_stage_ = HomeStage::kBrake;
+      home_after_brake_ = HomeStage::kAttained;
+    } else if (method >= 17 && method <= 22 && search > 0.0 && latch > 0.0) {
+      home_stage_ = HomeStage::kSearch;
+    } else {
+      home_stage_ = HomeStage::kError;  // a method this drive does not have, or no speeds
+    }
+  } else if (halt && home_stage_ != HomeStage::kNotStarted && home_stage_ != HomeStage::kAttained &&
+             home_stage_ != HomeStage::kError) {
+    home_stage_ = HomeStage::kInterrupted;
+  }
+  int bit = 2;
+  double side = -1.0;
+  bool leave = true;
+  switch (method) {
+    case 17: bit = 0; break;
+    case 18: bit = 1; side = 1.0; break;
+    case 19: side = 1.0; break;
+    case 20: side = 1.0; leave = false; break;
+    case 22: leave = false; break;
+    default: break;
+  }
+  const std::uint32_t di = inputs_at(x);
+  const bool sw = (di >> bit & 1u) != 0;
+  double v_target = 0.0;
+  switch (home_stage_) {
+    case HomeStage::kSearch:
+      if (sw) {
+        home_stage_ = HomeStage::kBrake;
+        home_after_brake_ = HomeStage::kAway;
+      } else {
+        v_target = side * search;
+      }
+      break;
+    case HomeStage::kAway:
+      if (!sw) {
+        if (leave) home_here(x);
+        home_stage_ = HomeStage::kBrake;
+        home_after_brake_ = leave ? HomeStage::kAttained : HomeStage::kApproach;
+      } else {
+        v_target = -side * latch;
+      }
+      break;
+    case HomeStage::kApproach:
+      if (sw) {
+        home_here(x);
+        home_stage_ = HomeStage::kBrake;
+        home_after_brake_ = HomeStage::kAttained;
+      } else {
+        v_target = side * latch;
+      }
+      break;
+    case HomeStage::kBrake:
+      if (home_v_mm_s_ == 0.0 && std::abs(plant_.velocity_mm_s()) < 0.05) home_stage_ = home_after_brake_;
+      break;
+    default: break;
+  }
+  const bool moving = home_stage_ == HomeStage::kSearch || home_stage_ == HomeStage::kAway ||
+                      home_stage_ == HomeStage::kApproach;
+  if (moving && ((v_target < 0.0 && (di & 1u) != 0 && bit != 0) || (v_target > 0.0 && (di & 2u) != 0 && bit != 1))) {
+    home_stage_ = HomeStage::kError;
+  }
+  const double dv = acc * s_.period_s;
+  home_v_mm_s_ = v_target > home_v_mm_s_ ? std::min(v_target, home_v_mm_s_ + dv)
+                                         : std::max(v_target, home_v_mm_s_ - dv);
 }
 
 // ------------------------------------------------------------------ SDO server
@@ -577,13 +703,24 @@ std::optional<std::uint32_t> SimDrive::write_object(std::uint16_t index, std::ui
   }
   if (index == 0x6060) {
     const auto m = static_cast<std::int8_t>(v & 0xFF);
-    const bool ok = s_.spindle ? (m == 3 || m == 9) : (m == 8 || m == 9);
+    const bool homing = !s_.spindle && m == 6 && find(0x6098, 0) != nullptr;
+    const bool ok = s_.spindle ? (m == 3 || m == 9) : (m == 8 || m == 9 || homing);
     if (!ok) return 0x06090030u;
-    if (state_ == co::Cia402State::kOperationEnabled) return 0x08000022u;
+    // Into and out of homing in operation enabled (as CiA 402 drives allow); other changes only
+    // with the power stage off.
+    const auto cur = static_cast<std::int8_t>(read_int(0x6061, 0));
+    if (state_ == co::Cia402State::kOperationEnabled && m != 6 && cur != 6) return 0x08000022u;
   }
   if (index == 0x605A && static_cast<std::int16_t>(v & 0xFFFF) > 8) return 0x06090030u;
+  if (index == 0x6098) {
+    const int m = static_cast<int>(static_cast<std::int8_t>(v & 0xFF));
+    if (!((m >= 17 && m <= 22) || m == 35 || m == 37)) return 0x06090030u;  // value range
+  }
   e->value = data;
-  if (index == 0x6060) set_int(0x6061, 0, static_cast<std::int8_t>(v & 0xFF));
+  if (index == 0x6060) {
+    set_int(0x6061, 0, static_cast<std::int8_t>(v & 0xFF));
+    if (static_cast<std::int8_t>(v & 0xFF) == 6) home_stage_ = HomeStage::kNotStarted;
+  }
   return std::nullopt;
 }
 

@@ -19,6 +19,11 @@
 // feedback carries the step of this SYNC, the transport adds no period, and contour-machine-sim
 // gives the FeedDrive the full delay_cycles.
 //
+// Homing mode 6 (0x6060 = 6, started by the rising edge of controlword bit 4): methods 17/18
+// (limit switch), 19..22 (home switch), 35/37 (current position) on the switches below; statusword
+// bits 10/12/13 as CiA 402 defines them for homing. A drive without homing support:
+// --missing-object NODE:0x6098 (the master's write of 0x6098 is then aborted 0x06020000).
+//
 // Quirks (SimQuirks, contour-machine-sim --missing-object/--pdos/--expedited-only/
 // --tpdo-sampling): drives that are not a complete CiA 301/402 drive. A missing 0x605A/0x6085
 // means the built-in quick stop (option 2, 1000000 counts/s^2).
@@ -158,6 +163,9 @@ class SimDrive {
   void send_sdo(std::uint8_t cs, std::uint16_t index, std::uint8_t sub, const std::uint8_t* d, std::size_t n);
   void abort(std::uint16_t index, std::uint8_t sub, std::uint32_t code);
   void raise_fault(std::uint16_t code);
+  void step_homing(std::uint16_t cw);  // CiA 402 homing mode 6, one period (apply_and_step)
+  [[nodiscard]] std::uint32_t inputs_at(double x_mm) const;
+  void home_here(double x_mm);
   void heartbeat();
   void on_master_heartbeat(const drivers::CanFrame& f);
   void master_heartbeat_lost();
@@ -172,6 +180,15 @@ class SimDrive {
   double spindle_rpm_ = 0.0, spindle_rev_ = 0.0;
   double v_cmd_mm_s_ = 0.0;  // velocity command actually applied (ramps in quick stop)
   std::uint16_t cw_ = 0, prev_cw_ = 0;
+  // Homing mode 6 (0x6098 method, 0x6099 speeds, 0x609A acceleration, 0x607C home offset): the
+  // methods 17..22 (limit / home switches of SimDriveSetup::switches) and 35/37 (here); others are
+  // a homing error. After homing 0x6064 reads 0x607C at the home point: pos_zero_counts_ is
+  // subtracted from the plant's counts (and added to a CSP target).
+  enum class HomeStage : std::uint8_t { kNotStarted, kSearch, kAway, kApproach, kBrake, kAttained, kError, kInterrupted };
+  HomeStage home_stage_ = HomeStage::kNotStarted;
+  HomeStage home_after_brake_ = HomeStage::kAttained;
+  double home_v_mm_s_ = 0.0;
+  std::int64_t pos_zero_counts_ = 0;
   std::int32_t rx_target_ = 0;
   bool rx_latched_ = false;
   std::uint16_t rx_cw_ = 0;

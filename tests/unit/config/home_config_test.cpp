@@ -64,7 +64,7 @@ TEST(HomeConfig, BadValuesAreRefusedWithTheirField) {
   auto errs = [](const std::string& home) {
     return config_errors(machine("      home: {" + home + "}\n", "  allow_unhomed: true\n"));
   };
-  EXPECT_TRUE(any_contains(errs("method: drive"), "CiA 402 homing mode 6) is not supported yet"));
+  EXPECT_TRUE(any_contains(errs("method: drive"), "drive_method"));
   EXPECT_TRUE(any_contains(errs("method: switch, search_vel_mm_min: 0, latch_vel_mm_min: 60"),
                            "search_vel_mm_min"));
   EXPECT_TRUE(any_contains(errs("method: switch, search_vel_mm_min: -100, latch_vel_mm_min: 600"),
@@ -103,4 +103,48 @@ TEST(HomeConfig, UseIndexIsASwitchOptionAndTheSimulatedIndexIsASimKey) {
   EXPECT_TRUE(any_contains(e, "needs method switch"));
   EXPECT_TRUE(any_contains(config_errors(machine("      sim: {index_pitch_mm: -1}\n", "  allow_unhomed: true\n")),
                            "index_pitch_mm"));
+}
+
+// method drive (CiA 402 homing mode 6).
+TEST(HomeConfig, ADriveHomeIsParsedWithItsMethodSpeedsAndTimeout) {
+  const auto cfg = load_config_string(machine(
+      "      home: {method: drive, drive_method: 21, search_vel_mm_min: -1200, latch_vel_mm_min: 60, "
+      "accel_mm_s2: 250, home_offset_mm: -199.5, home_position_mm: 0, sequence: 2}\n",
+      "  allow_unhomed: true\n"));
+  const HomeConfig& h = cfg.machine.axes[0].home;
+  EXPECT_EQ(h.method, HomeConfig::Method::kDrive);
+  EXPECT_EQ(h.drive_method, 21);
+  EXPECT_DOUBLE_EQ(h.search_vel_mm_s, 20.0);  // magnitudes: the method fixes the direction
+  EXPECT_DOUBLE_EQ(h.latch_vel_mm_s, 1.0);
+  EXPECT_DOUBLE_EQ(h.drive_accel_mm_s2, 250.0);
+  EXPECT_DOUBLE_EQ(h.drive_timeout_s, 60.0);
+  EXPECT_DOUBLE_EQ(h.home_offset_mm, -199.5);
+  EXPECT_DOUBLE_EQ(h.home_position_mm, 0.0);
+  EXPECT_EQ(h.sequence, 2);
+  // The current-position methods need no speeds.
+  const auto c35 = load_config_string(
+      machine("      home: {method: drive, drive_method: 35, drive_timeout_s: 5}\n", "  allow_unhomed: true\n"));
+  EXPECT_EQ(c35.machine.axes[0].home.drive_method, 35);
+  EXPECT_DOUBLE_EQ(c35.machine.axes[0].home.drive_timeout_s, 5.0);
+}
+
+TEST(HomeConfig, BadDriveHomesAreRefusedWithTheirField) {
+  auto errs = [](const std::string& home) {
+    return config_errors(machine("      home: {" + home + "}\n", "  allow_unhomed: true\n"));
+  };
+  const std::string sp = ", search_vel_mm_min: 600, latch_vel_mm_min: 60";
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 1" + sp), "drive_method: 1 is not a CiA 402 homing method"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 36" + sp), "drive_method"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 21, latch_vel_mm_min: 60"), "search_vel_mm_min"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 21, search_vel_mm_min: 60"), "latch_vel_mm_min"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 21, search_vel_mm_min: 60, latch_vel_mm_min: 600"),
+                           "must not be faster than search_vel_mm_min"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 21, accel_mm_s2: 0" + sp), "accel_mm_s2"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 21, drive_timeout_s: 0" + sp), "drive_timeout_s"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 21, use_index: true" + sp), "use_index"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 21, search_distance_mm: 5" + sp), "search_distance_mm"));
+  EXPECT_TRUE(any_contains(errs("method: drive, drive_method: 21, home_position_mm: 900" + sp), "home_position_mm"));
+  // The switch method's own keys are not the drive's.
+  EXPECT_TRUE(any_contains(errs("method: switch, search_vel_mm_min: -100, latch_vel_mm_min: 60, drive_method: 21"),
+                           "drive_method"));
 }

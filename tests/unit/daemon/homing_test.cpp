@@ -41,7 +41,7 @@ struct IdealAxes {
 };
 
 HomingSource::AxisPlan plan(int sequence, double search, double latch, double offset, double position) {
-  return {true, sequence, search, latch, offset, position, 100.0, false};
+  return {true, sequence, search, latch, offset, position, 100.0, false, false, 60.0};
 }
 
 struct HomingRun {
