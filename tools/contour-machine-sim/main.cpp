@@ -16,6 +16,8 @@
 // once), and the summary gains "storm": {seed, events per kind, tpdo_dropped, emcy_sent}.
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include <poll.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -421,6 +423,9 @@ int main(int argc, char** argv) {
   contour::drivers::CanFrame f;
   double path_mm = 0.0;
   long last_syncs = 0;
+  // --plant-stdin: plant events typed (or piped by a test) on stdin, applied between SYNCs.
+  bool stdin_open = plant != nullptr && plant_opt.from_stdin;
+  std::string stdin_buf;
   while (g_stop == 0) {
     bus->wait_readable(5000000);
     const std::int64_t now = mono_ns();
@@ -440,6 +445,23 @@ int main(int argc, char** argv) {
       for (const auto& d : drives)
         if (!d->is_spindle() && a < 3) axis_mm[a++] = d->position_mm();
       plant->step(drives.front()->syncs(), axis_mm);
+      pollfd in{0, POLLIN, 0};
+      if (stdin_open && ::poll(&in, 1, 0) == 1) {
+        char buf[256];
+        const ssize_t n = ::read(0, buf, sizeof buf);
+        if (n <= 0) stdin_open = false;  // EOF: no more events
+        if (n > 0) stdin_buf.append(buf, static_cast<std::size_t>(n));
+        for (auto nl = stdin_buf.find('\n'); nl != std::string::npos; nl = stdin_buf.find('\n')) {
+          const std::string kind = stdin_buf.substr(0, nl);
+          stdin_buf.erase(0, nl + 1);
+          if (kind.empty()) continue;
+          try {
+            plant->apply_now(kind, drives.front()->syncs());
+          } catch (const std::invalid_argument& e) {
+            std::cerr << "contour-machine-sim: stdin: " << e.what() << std::endl;
+          }
+        }
+      }
     }
     if (dyno) {
       double v2 = 0.0, rpm = 0.0;

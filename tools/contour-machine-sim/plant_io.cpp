@@ -240,6 +240,8 @@ void add_plant_options(CLI::App& app, PlantOptions& o) {
                  "KIND@SYNC plant event (door_open, door_close, air_loss, air_ok, carousel_jam, "
                  "carousel_free, drawbar_stuck, drawbar_free, sensor_dead, sensor_ok, "
                  "coupler_no_reply, coupler_ok, coupler_drop)");
+  app.add_flag("--plant-stdin", o.from_stdin,
+               "also read plant events from stdin, one KIND per line, applied at once");
   app.add_option("--coupler-watchdog-ms", o.watchdog_ms,
                  "MS the coupler drops its coils after MS without a request (default 500)")
       ->check(CLI::Range(10, 600000));
@@ -277,6 +279,14 @@ void PlantRunner::step(long syncs, const std::array<double, 3>& axis_mm) {
   if (syncs <= last_sync_) return;
   io_.step(static_cast<double>(syncs - last_sync_) * period_s_, axis_mm);
   last_sync_ = syncs;
+}
+
+void PlantRunner::apply_now(const std::string& kind, long syncs) {
+  PlantEvent e = parse_plant_event(kind + "@0");
+  e.sync = syncs;
+  apply_plant_event(e, io_.plant(), faults_, server_);
+  std::cout << nlohmann::json{{"plant", e.kind}, {"sync", syncs}}.dump() << std::endl;
+  ++events_applied_;
 }
 
 nlohmann::json PlantRunner::summary() const {

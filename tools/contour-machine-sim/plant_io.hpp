@@ -132,10 +132,14 @@ void apply_plant_event(const PlantEvent& e, control::plc::MachinePlant& plant,
 //   --plant-io HOST:PORT        serve the plant coupler there (port 0: any free port)
 //   --plant-event KIND@SYNC     schedule a plant event (repeatable)
 //   --coupler-watchdog-ms MS    the coupler's communication watchdog (default 500)
+//   --plant-stdin               also take plant events from stdin, one KIND per line, applied at
+//                               once (a test drives the plant at the moment it chooses: no SYNC
+//                               count to guess); each is acknowledged like a scheduled one
 struct PlantOptions {
   std::string endpoint;
   std::vector<std::string> events;
   int watchdog_ms = 500;
+  bool from_stdin = false;
 };
 void add_plant_options(CLI::App& app, PlantOptions& o);
 
@@ -147,6 +151,9 @@ class PlantRunner {
   // Throws std::invalid_argument (bad option, event) or std::runtime_error (cannot listen).
   PlantRunner(const PlantOptions& o, const config::Config& cfg);
   void step(long syncs, const std::array<double, 3>& axis_mm);
+  // Applies one event KIND now (--plant-stdin) and prints {"plant":KIND,"sync":syncs}; throws
+  // std::invalid_argument for an unknown KIND.
+  void apply_now(const std::string& kind, long syncs);
   [[nodiscard]] int port() const noexcept { return server_.port(); }
   [[nodiscard]] std::string host() const { return host_; }
   [[nodiscard]] nlohmann::json summary() const;
