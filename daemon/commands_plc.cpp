@@ -107,11 +107,19 @@ json Daemon::plc_brief_json(const LoopStatus& st) {
   json axis_fault = json::array();
   for (int i = 0; i < loop_->axes(); ++i) axis_fault.push_back(r.axis_fault[static_cast<std::size_t>(i)]);
   json cause{{"action", to_string(st.plc_cause.action)}, {"cycle", st.plc_cause.cycle}};
-  if (st.plc_cause.axis >= 0) cause["axis"] = st.plc_cause.axis;
   if (st.plc_cause.action == PlcAction::kFault) cause["fault_code"] = st.plc_cause.code;
   if (st.plc_cause.action == PlcAction::kEngineFault) {
+    // The index is the coupler's (I/O stale) or the program's (runtime error): named, not an axis.
     cause["engine_fault"] = to_string(st.plc_cause.engine);
     cause["code"] = st.plc_cause.code;
+    const auto i = static_cast<std::size_t>(st.plc_cause.axis);
+    if (st.plc_cause.engine == PlcFaultKind::kIoStale && st.plc_cause.axis >= 0 && i < cfg_.plc.modbus.size())
+      cause["device"] = cfg_.plc.modbus[i].name;
+    if (st.plc_cause.engine == PlcFaultKind::kRuntimeError && st.plc_cause.axis >= 0 &&
+        i < cfg_.plc.programs.size())
+      cause["program"] = cfg_.plc.programs[i].file;
+  } else if (st.plc_cause.axis >= 0) {
+    cause["axis"] = st.plc_cause.axis;
   }
   return {{"present", true},
           {"requests",

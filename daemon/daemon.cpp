@@ -211,6 +211,37 @@ void Daemon::start_components() {
   logger_ = std::make_unique<EventLogger>(loop_->events(),
                                           [this](const RtEvent& e, const std::string& t) { on_event(e, t); });
   logger_->set_describer([this](const RtEvent& e) -> std::string {
+    // A fault the PLC engine latched (detail: its kind) names what it is about: a stale coupler
+    // by name and endpoint, not "axis <index>". The index is in the loop's PLC cause, noted in
+    // the event's cycle and kept until a reset (FAULT takes no other engine fault).
+    if (e.kind == EventKind::kFault && e.cause == FaultCause::kPlcFault && e.detail != 0) {
+      const auto kind = static_cast<PlcFaultKind>(e.detail);
+      std::ostringstream o;
+      o << "cycle " << e.cycle << ": FAULT " << to_string(e.cause) << ": " << to_string(kind);
+      if (kind == PlcFaultKind::kIoStale) {
+        // The loop publishes its status at the end of the event's cycle: wait for that (bounded).
+        LoopStatus st = loop_->status();
+        for (int k = 0; k < 100 && st.cycle < e.cycle; ++k) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+          st = loop_->status();
+        }
+        const PlcStopCause c = st.plc_cause;
+        const auto i = static_cast<std::size_t>(c.axis);
+        if (c.action == PlcAction::kEngineFault && c.engine == kind && c.axis >= 0 &&
+            i < cfg_.plc.modbus.size()) {
+          const auto& dev = cfg_.plc.modbus[i];
+          o << ": coupler " << dev.name << " ("
+            << (dev.transport.transport == drivers::modbus::Transport::kTcp
+                    ? dev.transport.host + ":" + std::to_string(dev.transport.port)
+                    : dev.transport.device)
+            << ")";
+        }
+        o << ", inputs " << e.value << " s old > stale_ms " << e.limit * 1e3;
+      } else if (kind == PlcFaultKind::kMcodeTimeout || kind == PlcFaultKind::kToolChangeTimeout) {
+        o << " after " << e.limit << " s";
+      }
+      return o.str();
+    }
     // A programmed pause names its line and what it waits for (M6: the tool to load). Pauses
     // happen only in programs, which the planner (created below) planned.
     if (e.kind != EventKind::kProgramPause || planner_ == nullptr) return {};

@@ -56,7 +56,8 @@ struct FaultReport {
   int axis = -1;  // -1: not an axis (spindle, bus, contour); heartbeat: the node-id
   double value = 0.0;
   double limit = 0.0;
-  std::uint8_t detail = 0;  // kLimitCycle: control::ChatterFigureKind (which figure)
+  std::uint8_t detail = 0;  // kLimitCycle: control::ChatterFigureKind (which figure); kPlcFault:
+                            // the PLC engine's PlcFaultKind (0: the PLC's own request)
   explicit operator bool() const noexcept { return cause != FaultCause::kNone; }
 };
 

@@ -657,9 +657,11 @@ void ServoLoop::logic() noexcept {
     }
   } else if (st != MachineState::kFault && st != MachineState::kEstop) {
     if (plc_out_.fault) {
+      // The fault's index is a coupler or a program, not an axis: the status and the log name
+      // it from plc_cause_ / the event's detail (the engine fault's kind), never as "axis N".
       note(PlcAction::kEngineFault, plc_out_.fault.index, plc_out_.fault.code, plc_out_.fault.kind);
-      raise_fault(FaultReport{FaultCause::kPlcFault, plc_out_.fault.index, plc_out_.fault.value,
-                              plc_out_.fault.limit});
+      raise_fault(FaultReport{FaultCause::kPlcFault, -1, plc_out_.fault.value, plc_out_.fault.limit,
+                              static_cast<std::uint8_t>(plc_out_.fault.kind)});
     } else if (rq.fault) {
       note(PlcAction::kFault, -1, rq.fault_code, PlcFaultKind::kNone);
       raise_fault(FaultReport{FaultCause::kPlcFault, -1, static_cast<double>(rq.fault_code), 0.0});

@@ -123,7 +123,8 @@ struct RtEvent {
   double value = 0.0;  // fault: the measured value; limit in `limit`
   double limit = 0.0;
   std::uint64_t job = 0;
-  std::uint8_t detail = 0;  // kLimitCycle fault / kLimitCycleWarning: control::ChatterFigureKind
+  std::uint8_t detail = 0;  // kLimitCycle fault / kLimitCycleWarning: control::ChatterFigureKind;
+                            // kPlcFault raised by the PLC engine: its PlcFaultKind (0: a request)
 };
 
 // One telemetry sample (RT -> writer thread).
@@ -152,7 +153,8 @@ enum class PlcAction : std::uint8_t { kNone, kEstop, kFault, kAxisFault, kEngine
 struct PlcStopCause {
   PlcAction action = PlcAction::kNone;
   std::uint64_t cycle = 0;
-  int axis = -1;
+  int axis = -1;                               // kAxisFault: the axis; kEngineFault: the engine
+                                               // fault's index (coupler, program), not an axis
   std::int32_t code = 0;                       // NC.fault_code, or the engine fault's code
   PlcFaultKind engine = PlcFaultKind::kNone;   // kEngineFault: which
 };

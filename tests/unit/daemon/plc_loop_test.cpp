@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include "daemon/event_log.hpp"
 #include "daemon/plc_engine.hpp"
 #include "loop_rig.hpp"
 #include "tests/support/alloc_counter.hpp"
@@ -197,6 +198,47 @@ TEST(PlcLoop, EstopRequestAndItsReset) {
   r.loop.post({CommandKind::kReset});
   r.step(30);
   EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+  plc.stop();
+}
+
+// A fault the PLC engine latches (here a runtime error in the second program) is not an axis
+// fault: the status names no axis (the engine fault's index, the program's, is in plc_cause) and
+// the fault event carries the engine fault's kind for the log. It used to report "axis 1".
+TEST(PlcLoop, EngineFaultIsNotAnAxisFault) {
+  const std::string dir = ::testing::TempDir();
+  std::ofstream(dir + "/a.st") << "PROGRAM a\n  lamp := TRUE;\nEND_PROGRAM\n";
+  std::ofstream(dir + "/b.st") << "PROGRAM b\nVAR x : INT; END_VAR\n  x := 10 / d;\nEND_PROGRAM\n";
+  const std::string yaml = slurp("config/sim.yaml") + "\nplc:\n  programs: [{file: " + dir +
+                           "/a.st}, {file: " + dir + "/b.st}]\n  signals:\n    - {name: lamp}\n" +
+                           "    - {name: d, type: INT, default: 1}\n";
+  const config::Config cfg = config::load_config_string(yaml, dir + "/x.yaml");
+  Rig r(cfg);
+  PlcEngine plc(cfg);
+  r.loop.attach_plc(&plc);
+  plc.start();
+  ASSERT_TRUE(r.enable());
+  r.step(20);
+  ASSERT_EQ(r.loop.status().state, MachineState::kReady);
+  const std::size_t mark = r.events.size();
+  ASSERT_EQ(plc.force("d", "0"), "");
+  r.step(3);
+  const LoopStatus st = r.loop.status();
+  EXPECT_EQ(st.state, MachineState::kFault);
+  EXPECT_EQ(st.cause, FaultCause::kPlcFault);
+  EXPECT_EQ(st.fault_axis, -1);
+  EXPECT_EQ(st.plc_cause.action, PlcAction::kEngineFault);
+  EXPECT_EQ(st.plc_cause.engine, PlcFaultKind::kRuntimeError);
+  EXPECT_EQ(st.plc_cause.axis, 1);  // the program's index
+  bool seen = false;
+  for (std::size_t i = mark; i < r.events.size(); ++i) {
+    const RtEvent& e = r.events[i];
+    if (e.kind != EventKind::kFault) continue;
+    seen = true;
+    EXPECT_EQ(e.axis, -1);
+    EXPECT_EQ(e.detail, static_cast<std::uint8_t>(PlcFaultKind::kRuntimeError));
+    EXPECT_EQ(describe(e).find("axis"), std::string::npos) << describe(e);
+  }
+  EXPECT_TRUE(seen);
   plc.stop();
 }
 
