@@ -15,18 +15,18 @@
 #include <string>
 
 #include "tests/support/daemon_process.hpp"
+#include "tests/support/sim_config.hpp"
 #include "tests/support/run_cmd.hpp"
 
 namespace {
 
 using nlohmann::json;
-const std::string kSrc = CONTOUR_SOURCE_DIR;
 const std::string kCtl = std::string(CONTOUR_BINARY_DIR) + "/tools/contourctl";
 
 // config/sim.yaml, homing required, power-up 19.5 / 15 / 9.5 mm above the home switches, X homed
 // by its drive with `x_home` (the keys after `method: drive`).
 std::string drive_homing_config(const std::string& tag, const std::string& x_home) {
-  std::string y = contour::test::slurp(kSrc + "/config/sim.yaml");
+  std::string y = contour::test::sim_yaml(contour::test::SimPlc::kNone);
   auto sub = [&y](const std::string& from, const std::string& to) {
     const auto at = y.find(from);
     EXPECT_NE(at, std::string::npos) << from;

@@ -434,7 +434,7 @@ int main(int argc, char** argv) {
       if (storm && f.id == contour::drivers::canopen::kCobSync && !f.error && !f.rtr && !f.extended)
         storm->on_sync();  // before the drives step: an event acts on this SYNC
       for (auto& d : drives) {
-        d->tick_wall(now);
+        d->set_wall(now);
         d->on_frame(f);
       }
     }

@@ -107,6 +107,11 @@ class SimDrive {
   void power_on();  // sends the boot-up, enters pre-operational
   void on_frame(const drivers::CanFrame& f);
   // Wall-clock tick for the heartbeat producer outside lockstep (pre-operational, or no SYNC).
+  // The wall-clock time of the frames about to be handled (on_frame stamps SYNC and the master's
+  // heartbeat with it). Set before each queued frame; tick_wall runs the wall-clock checks only
+  // after the queue is drained, so frames that waited while this process was descheduled count
+  // as received, not as silence.
+  void set_wall(std::int64_t now_ns) { now_wall_ns_ = now_ns; }
   void tick_wall(std::int64_t now_ns);
 
   [[nodiscard]] std::uint8_t node_id() const { return s_.node_id; }

@@ -208,7 +208,7 @@ TEST(PlcLoop, EngineFaultIsNotAnAxisFault) {
   const std::string dir = ::testing::TempDir();
   std::ofstream(dir + "/a.st") << "PROGRAM a\n  lamp := TRUE;\nEND_PROGRAM\n";
   std::ofstream(dir + "/b.st") << "PROGRAM b\nVAR x : INT; END_VAR\n  x := 10 / d;\nEND_PROGRAM\n";
-  const std::string yaml = slurp("config/sim.yaml") + "\nplc:\n  programs: [{file: " + dir +
+  const std::string yaml = contour::test::sim_yaml(contour::test::SimPlc::kNone) + "\nplc:\n  programs: [{file: " + dir +
                            "/a.st}, {file: " + dir + "/b.st}]\n  signals:\n    - {name: lamp}\n" +
                            "    - {name: d, type: INT, default: 1}\n";
   const config::Config cfg = config::load_config_string(yaml, dir + "/x.yaml");
