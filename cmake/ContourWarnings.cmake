@@ -23,6 +23,13 @@ function(contour_test_compile_settings tgt)
   target_compile_definitions(${tgt} PRIVATE CONTOUR_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
                              CONTOUR_BINARY_DIR="${PROJECT_BINARY_DIR}")
   target_compile_options(${tgt} PRIVATE $<$<CONFIG:Debug,RelWithDebInfo>:-g1>)
+  # CONTOUR_TEST_OPT (the ci preset: -Og): the optimisation of the test programs' own sources,
+  # after the build type's flag, so it wins. The product (libraries, contourd, the tools) keeps
+  # the build type's; the unit tests are built at -O3 (ci-o3) and -O0 + sanitizers (dev) as well.
+  # Measured on tests/unit/daemon/command_server_test.cpp: -O2 15.5 s, -Og 7.4 s of CPU.
+  if(CONTOUR_TEST_OPT)
+    target_compile_options(${tgt} PRIVATE ${CONTOUR_TEST_OPT})
+  endif()
 endfunction()
 
 # contour_add_gtests(LABEL <label> LIBS <libs...> SOURCES <files...>)

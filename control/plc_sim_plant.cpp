@@ -1,6 +1,7 @@
 #include "control/plc_sim_plant.hpp"
 
 #include <cmath>
+#include <numbers>
 
 namespace contour::control::plc {
 
@@ -48,8 +49,24 @@ void MachinePlant::set_limits(const std::array<double, 3>& neg_mm,
   pos_mm_ = pos_mm;
 }
 
+namespace {
+double wrap_pockets(double p) noexcept {
+  const double n = MachinePlant::kPockets;
+  return std::fmod(std::fmod(p, n) + n, n);
+}
+// The ring of a Geneva drive at crank position `crank` (pocket turns): standing at pocket k for
+// crank in [k - kDwell/2, k + kDwell/2], a half-cosine index from k to k + 1 in between.
+double geneva_ring(double crank) noexcept {
+  constexpr double half = MachinePlant::kDwell / 2.0;
+  const double k = std::floor(crank - half);
+  const double s = std::fmin(1.0, (crank - half - k) / (1.0 - MachinePlant::kDwell));
+  return wrap_pockets(k + 0.5 * (1.0 - std::cos(std::numbers::pi * s)));
+}
+}  // namespace
+
 void MachinePlant::set_carousel_position(double pockets) noexcept {
-  carousel_ = std::fmod(std::fmod(pockets, kPockets) + kPockets, kPockets);
+  crank_ = wrap_pockets(pockets);
+  carousel_ = geneva_ring(crank_);
 }
 
 void MachinePlant::step(double dt_s, const std::array<double, 3>& axis_mm) noexcept {
@@ -77,7 +94,10 @@ void MachinePlant::step(double dt_s, const std::array<double, 3>& axis_mm) noexc
 
   // Carousel: both directions at once cancel (a contactor interlock would).
   const int dir = (on(PlantPoint::kCarouselCw) ? 1 : 0) - (on(PlantPoint::kCarouselCcw) ? 1 : 0);
-  if (dir != 0 && !faults_.carousel_jam) set_carousel_position(carousel_ + dir * dt_s / kIndex_s);
+  if (dir != 0 && !faults_.carousel_jam) {
+    crank_ = wrap_pockets(crank_ + dir * dt_s / kIndex_s);
+    carousel_ = geneva_ring(crank_);
+  }
   const double nearest = std::round(carousel_);
   const bool in_pos = std::fabs(carousel_ - nearest) <= kPocketWindow && !faults_.pocket_sensor_dead;
   const int pocket = static_cast<int>(nearest) % kPockets + 1;

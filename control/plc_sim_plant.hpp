@@ -9,10 +9,15 @@
 //   air         pressure switch: OK unless the operator or a fault removes the supply
 //   lube        pump output builds pressure: lube_pressure_ok after kLubeBuild_s of pumping,
 //               lost kLubeHold_s after the pump stops
-//   carousel    8 pockets on a ring, turned by carousel_cw / carousel_ccw at kIndex_s per pocket;
+//   carousel    8 pockets on a ring, turned by carousel_cw / carousel_ccw through a Geneva drive:
+//               the motor's crank turns once per pocket in kIndex_s, and the ring moves during
+//               1 - kDwell of that turn (a smooth index) and stands still at the pocket for the
+//               rest (kDwell: 0.625 for an 8-slot Geneva wheel, 135 of 360 degrees moving).
 //               carousel_in_position inside +-kPocketWindow of a pocket, carousel_pocket = the
-//               pocket number 1..8 there (0 between pockets); both off while moving too fast
-//               is not modelled (the sensor is a cam, not a counter)
+//               pocket number 1..8 there (0 between pockets). The dwell is what lets a PLC stop
+//               the motor at a pocket through slow remote I/O (a Modbus coupler polled every few
+//               ms, late under load): it has kDwell x kIndex_s (156 ms) to react, not the few ms
+//               the ring needs to pass the sensor window.
 //   drawbar     drawbar_unclamp (valve) opens the drawbar in kDrawbar_s when air is present;
 //               drawbar_clamped / drawbar_unclamped end switches, both off while travelling
 //   limits      per axis a negative and a positive overtravel switch, TRUE when actuated (the
@@ -61,6 +66,7 @@ class MachinePlant {
   static constexpr int kPockets = 8;
   static constexpr double kIndex_s = 0.25;        // carousel time per pocket
   static constexpr double kPocketWindow = 0.04;   // in-position window, in pockets
+  static constexpr double kDwell = 0.625;         // fraction of a crank turn standing at a pocket
   static constexpr double kDrawbar_s = 0.15;
   static constexpr double kLubeBuild_s = 1.5;
   static constexpr double kLubeHold_s = 5.0;
@@ -73,7 +79,8 @@ class MachinePlant {
   void set_door_open(bool open) noexcept { door_open_request_ = open; }
   void set_air_supply(bool on) noexcept { air_supply_ = on; }
   void set_faults(const PlantFaults& f) noexcept { faults_ = f; }
-  void set_carousel_position(double pockets) noexcept;  // 0 = pocket 1 under the spindle
+  void set_carousel_position(double pockets) noexcept;  // 0 = pocket 1 under the spindle (the
+                                                         // crank too: mid-dwell at a pocket)
 
   // One step of dt_s with the PLC's outputs as they are now and the axes' positions.
   void step(double dt_s, const std::array<double, 3>& axis_mm) noexcept;
@@ -94,7 +101,8 @@ class MachinePlant {
   bool door_open_request_ = false;
   bool door_blocked_ = false;
   bool air_supply_ = true;
-  double carousel_ = 0.0;       // pockets, [0, kPockets)
+  double crank_ = 0.0;          // the Geneva drive's crank, in pocket turns, [0, kPockets)
+  double carousel_ = 0.0;       // the ring, pockets, [0, kPockets)
   double drawbar_ = 0.0;        // 0 clamped .. 1 unclamped
   double lube_on_s_ = 0.0;      // pumping time towards kLubeBuild_s
   double lube_off_s_ = 1e9;     // time since the pump stopped

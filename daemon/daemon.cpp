@@ -652,13 +652,23 @@ int Daemon::run() {
   while (std::chrono::steady_clock::now() < until && loop_->status().state != MachineState::kReady) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
-  if (loop_->status().state != MachineState::kReady) {
-    spdlog::critical("drives did not enable within 5 s (state {})", to_string(loop_->status().state));
+  const LoopStatus first = loop_->status();
+  if (first.state == MachineState::kFault || first.state == MachineState::kEstop) {
+    // A latched fault or E-stop at power-up (E-stop pressed, a machine-logic fault such as a
+    // coupler not answering yet, a drive fault): the machine comes up in FAULT/ESTOP with the
+    // cause in status, as a control does, and `reset` brings it to READY once the cause is gone.
+    // Exiting instead would hide the cause and make systemd restart the daemon in a loop.
+    spdlog::error("started in {} (cause {}): the loop runs with the drives disabled; reset once "
+                  "the cause is gone", to_string(first.state), to_string(first.cause));
+    sd_notify(0, "READY=1\nSTATUS=FAULT or ESTOP at start-up, loop running: reset once the cause is gone");
+  } else if (first.state != MachineState::kReady) {
+    spdlog::critical("drives did not enable within 5 s (state {})", to_string(first.state));
     stop_components();
     return 1;
+  } else {
+    sd_notify(0, "READY=1\nSTATUS=drives enabled, loop running");
+    spdlog::info("ready: drives enabled, loop running");
   }
-  sd_notify(0, "READY=1\nSTATUS=drives enabled, loop running");
-  spdlog::info("ready: drives enabled, loop running");
   std::uint64_t wd_usec = 0;
   const bool watchdog = sd_watchdog_enabled(0, &wd_usec) > 0;
   std::uint64_t last_cycle = loop_->status().cycle;

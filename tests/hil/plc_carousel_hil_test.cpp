@@ -413,8 +413,15 @@ TEST(PlcCarouselHil, LostCouplerFaultsTheMachineAndResetWaitsForItToAnswer) {
   EXPECT_EQ(st["plc"]["cause"].value("device", ""), "plant") << st.dump();
   EXPECT_FALSE(st["plc"]["cause"].contains("axis")) << "a coupler is not an axis: " << st.dump();
   EXPECT_EQ(st["fault"].value("axis", 0), -1) << st.dump();
-  // The latched fault names the coupler and its age against stale_ms.
-  json ps = d.ok({{"cmd", "plc_status"}});
+  // The latched fault names the coupler and its age against stale_ms. plc_status is the engine's
+  // own snapshot, published after the loop's: it may still be a few cycles behind the status that
+  // reported the FAULT (seen: cycle 780 against a fault at 792), so wait for it to catch up.
+  json ps;
+  for (int i = 0; i < 3000; ++i) {
+    ps = d.ok({{"cmd", "plc_status"}});
+    if (!ps["faults"].empty()) break;
+    std::this_thread::sleep_for(10ms);
+  }
   ASSERT_EQ(ps["faults"].size(), 1U) << ps.dump();
   EXPECT_EQ(ps["faults"][0]["kind"], "PLC I/O stale") << ps.dump();
   EXPECT_EQ(ps["faults"][0]["device"], "plant") << ps.dump();
@@ -503,7 +510,14 @@ TEST(PlcCarouselHil, DoorOpenOverTheCouplerHoldsTheProgramUntilClosedAndResumed)
   EXPECT_EQ(st["plc"]["requests"]["feed_hold"], true);
   EXPECT_EQ(st["plc"]["requests"]["inhibit_start"], true);
   EXPECT_EQ(st["plc"]["cause"]["action"], "feed_hold_req");
-  EXPECT_EQ(signal(d.ok({{"cmd", "io"}}), "door_closed")["value"], false);
+  // The io image is the PLC engine's snapshot, which may trail the loop's status by a few cycles.
+  json door;
+  for (int i = 0; i < 3000; ++i) {
+    door = signal(d.ok({{"cmd", "io"}}), "door_closed");
+    if (door["value"] == false) break;
+    std::this_thread::sleep_for(10ms);
+  }
+  EXPECT_EQ(door["value"], false) << door.dump();
   EXPECT_LT(st["act_mm"][0].get<double>(), 29.0);
 
   // Open: resume is refused, the program stays held.

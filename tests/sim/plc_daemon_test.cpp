@@ -6,10 +6,14 @@
 // cannot be forced; without a plc: section `io` is refused. Waits are bounded polls.
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <csignal>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "tests/support/daemon_process.hpp"
@@ -157,6 +161,46 @@ TEST(PlcDaemon, WithoutAPlcSectionIoIsRefused) {
   EXPECT_NE(r.value("error", std::string()).find("no soft PLC"), std::string::npos) << r.dump();
   EXPECT_EQ(d.ok({{"cmd", "plc_status"}})["present"], false);
   EXPECT_EQ(d.ok({{"cmd", "status"}})["plc"]["present"], false);
+}
+
+// A machine-logic fault at power-up (here a program that requests a fault until `ok` is set, like
+// an I/O coupler that does not answer yet): contourd stays up in FAULT with the cause in status,
+// instead of exiting "drives did not enable" (which made systemd restart it in a loop and hid the
+// cause). reset is refused while the cause remains and brings the machine to READY once it is gone.
+TEST(PlcDaemon, AFaultAtStartUpLeavesTheDaemonUpInFaultUntilReset) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("contour_startfault_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  std::ofstream(dir / "f.st") << "PROGRAM f\n  NC.fault_req := NOT ok;\n  NC.fault_code := 7;\nEND_PROGRAM\n";
+  contour::test::DaemonProcess::Options o;
+  o.config = contour::test::write_sim_yaml(
+      (dir / "startfault.yaml").string(), contour::test::SimPlc::kNone,
+      "plc:\n  programs: [{file: " + (dir / "f.st").string() + "}]\n  signals:\n    - {name: ok}\n");
+  o.ready_polls = 0;
+  contour::test::DaemonProcess d("startfault", o);
+  ASSERT_TRUE(d.connected()) << d.log();
+  // The daemon gives the drives 5 s to enable; then it says it started in FAULT and stays up.
+  std::string log;
+  for (int i = 0; i < 3000 && log.find("started in FAULT") == std::string::npos; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    log = d.log();
+  }
+  ASSERT_NE(log.find("started in FAULT (cause machine logic fault)"), std::string::npos) << log;
+  EXPECT_EQ(log.find("did not enable"), std::string::npos) << log;
+  json st = d.ok({{"cmd", "status"}});
+  EXPECT_EQ(st["state"], "FAULT") << st.dump();
+  EXPECT_EQ(st["cause"], "machine logic fault") << st.dump();
+  const json refused = d.call({{"cmd", "reset"}});
+  EXPECT_FALSE(refused.value("ok", true)) << refused.dump();
+  EXPECT_EQ(d.state(), "FAULT");
+  // The cause goes: reset enables the drives.
+  d.ok({{"cmd", "io"}, {"action", "force"}, {"name", "ok"}, {"value", true}});
+  d.ok({{"cmd", "reset"}});
+  st = d.wait_status([](const json& s) { return s["state"] == "READY"; });
+  EXPECT_EQ(st["state"], "READY") << st.dump() << "\n" << d.log();
+  EXPECT_EQ(d.terminate_and_wait(SIGTERM), 0) << d.log();
+  std::error_code ec;
+  fs::remove_all(dir, ec);
 }
 
 }  // namespace
