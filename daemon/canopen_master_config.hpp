@@ -34,10 +34,14 @@ inline drivers::canopen::DriveQuirks to_quirks(const config::DriveProfile& p) {
   return q;
 }
 
-// The PLC's cia402 bindings (plc.signals) -> which axis nodes map 0x60FD (TPDO2) and which
-// 0x60FE:01 bits (RPDO2). Axis i is node i of `c` (resolve_bus_nodes: axes first, in
-// machine.axes order). Nodes no binding names keep their mapping as it was.
+// Which axis nodes map 0x60FD (TPDO2) and which 0x60FE:01 bits (RPDO2): the axes homed on a
+// switch (home.method switch: the home switch is 0x60FD bit 2) and the PLC's cia402 bindings
+// (plc.signals). Axis i is node i of `c` (resolve_bus_nodes: axes first, in machine.axes order).
+// Other nodes keep their mapping as it was.
 inline void add_digital_io(const config::Config& cfg, drivers::canopen::MasterConfig& c) {
+  for (std::size_t a = 0; a < cfg.machine.axes.size() && a < c.nodes.size(); ++a) {
+    if (cfg.machine.axes[a].home.method == config::HomeConfig::Method::kSwitch) c.nodes[a].digital_inputs = true;
+  }
   if (!cfg.plc.present) return;
   for (const auto& sig : cfg.plc.signals) {
     const auto& b = sig.binding;

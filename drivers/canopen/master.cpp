@@ -128,7 +128,7 @@ Master::Master(CanBus& bus, MasterConfig cfg, Log log_fn)
     // The digital I/O has a PDO of its own (TPDO1/RPDO1 keep their mapping: the default ones
     // have no room for 32 more bits in 8 bytes).
     if (n.digital_inputs && q.tpdos < 2)
-      throw StartupError(who + ": 0x60FD digital inputs (plc cia402 input binding) need TPDO2, "
+      throw StartupError(who + ": 0x60FD digital inputs (home switch or plc cia402 input binding) need TPDO2, "
                                "the drive has 1 TPDO" + prof);
     if (n.digital_output_mask != 0 && q.rpdos < 2)
       throw StartupError(who + ": 0x60FE:01 digital outputs (plc cia402 output binding) need "
@@ -322,7 +322,9 @@ void Master::check_digital_io(const NodeSetup& n) {
                          sdo_abort_text(e.code()) + ")");
     }
   };
-  if (n.digital_inputs) need(0x60FD, 0, "digital inputs, needed by the PLC's cia402 input bindings");
+  if (n.digital_inputs) {
+    need(0x60FD, 0, "digital inputs, needed by a home switch (home.method switch) or the PLC's cia402 input bindings");
+  }
   if (n.digital_output_mask != 0) {
     need(0x60FE, 1, "digital outputs, needed by the PLC's cia402 output bindings");
     std::uint8_t b[4];
@@ -607,6 +609,7 @@ CycleStatus Master::begin_cycle(std::int64_t now_ns) noexcept {
     cycling_ = true;
     for (auto& r : rt_) r.last_heartbeat_ns = now_ns;
     last_master_hb_ns_ = -1;
+    last_master_hb_cycle_ = counters_.cycles;
   }
   now_ns_ = now_ns;
   ++counters_.cycles;
@@ -622,12 +625,18 @@ CycleStatus Master::begin_cycle(std::int64_t now_ns) noexcept {
   const SendResult s = bus_.send(sync_frame());
   if (s == SendResult::kDropped) ++counters_.tx_dropped;
   // The producer runs on the wall clock whatever `now_ns` is (see the header: the drives time it
-  // with their own clock).
+  // with their own clock), and also every master_heartbeat_ms worth of SYNC periods: cycles that
+  // catch up after a stall (a burst of SYNCs faster than real time) must not leave a consumer
+  // that counts SYNCs (contour-machine-sim in lockstep) 3 x its period without a heartbeat.
   const std::int64_t wall = sync_mono_ns_;
+  const std::uint64_t hb_cycles = std::max<std::uint64_t>(
+      1, std::uint64_t{cfg_.master_heartbeat_ms} * 1000u / std::max<std::uint32_t>(1, cfg_.period_us));
   if (cfg_.master_heartbeat_ms > 0 && heartbeat_on_ &&
       (last_master_hb_ns_ < 0 ||
-       wall - last_master_hb_ns_ >= static_cast<std::int64_t>(cfg_.master_heartbeat_ms) * 1000000LL)) {
+       wall - last_master_hb_ns_ >= static_cast<std::int64_t>(cfg_.master_heartbeat_ms) * 1000000LL ||
+       counters_.cycles - last_master_hb_cycle_ >= hb_cycles)) {
     last_master_hb_ns_ = wall;
+    last_master_hb_cycle_ = counters_.cycles;
     if (bus_.send(heartbeat_frame(cfg_.master_node_id, NmtState::kOperational)) ==
         SendResult::kDropped)
       ++counters_.tx_dropped;

@@ -16,7 +16,9 @@
 // (PRODUCER) is always sent on CLOCK_MONOTONIC: the drives consume it with a consumer time in
 // milliseconds of their own clock (0x1016 = 3 x master_heartbeat_ms), so cycles that run slower
 // than real time (lockstep on a loaded host) must not stretch it (issue 16: they used to, and
-// the drives timed out with EMCY 0x8130).
+// the drives timed out with EMCY 0x8130). It is also sent every master_heartbeat_ms worth of
+// cycles, so a burst of cycles faster than real time (catching up after a stall) does not
+// stretch it for a consumer that counts SYNCs either.
 //
 // Faults are latched per node (drive fault, heartbeat lost, missed-TPDO streak, unexpected
 // boot-up) and reported as MasterEvents through a fixed ring (pop_event, non-RT describe()).
@@ -330,6 +332,7 @@ class Master {
   std::size_t ev_head_ = 0, ev_tail_ = 0;
   std::int64_t now_ns_ = 0;
   std::int64_t last_master_hb_ns_ = -1;
+  std::uint64_t last_master_hb_cycle_ = 0;  // counters_.cycles at the last master heartbeat
   std::int64_t sync_mono_ns_ = 0;
   bool fault_reset_ = false;
   bool cycling_ = false;
