@@ -50,11 +50,38 @@ std::span<const std::uint16_t> optional_objects() noexcept { return kOptionalObj
 std::vector<CanFilter> master_rx_filters(const MasterConfig& cfg) {
   std::vector<CanFilter> f;
   for (const auto& n : cfg.nodes) {
-    for (std::uint32_t base : {kCobEmcy, kCobTpdo[0], kCobSdoTx, kCobHeartbeat})
-      f.push_back({base + n.node_id, 0x7FF});
+    for (std::uint32_t base : {kCobEmcy, kCobSdoTx, kCobHeartbeat}) f.push_back({base + n.node_id, 0x7FF});
+    if (n.kind == NodeKind::kIoModule) {
+      const std::size_t tpdos = io_module_pdos(n.io, false).size();
+      for (std::size_t k = 0; k < tpdos && k < 4; ++k) f.push_back({kCobTpdo[k] + n.node_id, 0x7FF});
+      continue;
+    }
+    f.push_back({kCobTpdo[0] + n.node_id, 0x7FF});
     if (n.digital_inputs) f.push_back({kCobTpdo[1] + n.node_id, 0x7FF});
   }
   return f;
+}
+
+std::vector<PdoMapping> io_module_pdos(const IoModuleMap& io, bool rx) {
+  std::vector<PdoMapping> out;
+  auto add = [&](std::uint16_t index, std::uint8_t mask, std::uint8_t bits) {
+    for (int k = 0; k < kIoChannels; ++k) {
+      if (((mask >> k) & 1u) == 0) continue;
+      if (out.empty() || out.back().bytes() + bits / 8u > 8 ||
+          out.back().count >= PdoMapping::kMaxEntries)
+        out.emplace_back();
+      PdoMapping& m = out.back();
+      m.entries[m.count++] = PdoEntry{index, static_cast<std::uint8_t>(k + 1), bits};
+    }
+  };
+  if (rx) {
+    add(0x6200, io.digital_outputs, 8);
+    add(0x6411, io.analog_outputs, 16);
+  } else {
+    add(0x6000, io.digital_inputs, 8);
+    add(0x6401, io.analog_inputs, 16);
+  }
+  return out;
 }
 
 PdoMapping digital_inputs_tpdo() {
@@ -92,12 +119,33 @@ Master::Master(CanBus& bus, MasterConfig cfg, Log log_fn)
   index_by_node_.fill(-1);
   if (cfg_.nodes.empty()) throw StartupError("bus: no nodes configured");
   std::vector<CyclicFrame> frames{{0, 1}};  // SYNC
+  io_pdos_.resize(cfg_.nodes.size());
   for (std::size_t i = 0; i < cfg_.nodes.size(); ++i) {
     const auto& n = cfg_.nodes[i];
     const std::string who = node_label(n.node_id);
     if (n.node_id < 1 || n.node_id > 127) throw StartupError(who + ": node-id out of 1..127");
     if (index_by_node_[n.node_id] >= 0) throw StartupError(who + ": node-id used twice");
     index_by_node_[n.node_id] = static_cast<std::int16_t>(i);
+    if (n.kind == NodeKind::kIoModule) {
+      // A CiA 401 module: the PDOs follow from what the PLC uses; each one more frame a cycle.
+      const auto tx = io_module_pdos(n.io, false);
+      const auto rx = io_module_pdos(n.io, true);
+      if (tx.empty() && rx.empty()) throw StartupError(who + ": CiA 401 module maps no object");
+      const std::string prof = " (profile '" + n.quirks.profile + "')";
+      if (tx.size() > n.quirks.tpdos)
+        throw StartupError(who + ": the CiA 401 inputs used need " + std::to_string(tx.size()) +
+                           " TPDOs, the module has " + std::to_string(n.quirks.tpdos) + prof);
+      if (rx.size() > n.quirks.rpdos)
+        throw StartupError(who + ": the CiA 401 outputs used need " + std::to_string(rx.size()) +
+                           " RPDOs, the module has " + std::to_string(n.quirks.rpdos) + prof);
+      IoPdos& p = io_pdos_[i];
+      for (const auto& m : tx) p.tx[p.ntx++] = m;
+      for (const auto& m : rx) p.rx[p.nrx++] = m;
+      const int every = n.sync_every < 1 ? 1 : n.sync_every;
+      for (const auto& m : tx) frames.push_back({static_cast<int>(m.bytes()), every});
+      for (const auto& m : rx) frames.push_back({static_cast<int>(m.bytes()), every});
+      continue;
+    }
     for (const auto* m : {&n.rpdo, &n.tpdo}) {
       const std::string err = m->validate();
       if (!err.empty()) throw StartupError(who + ": PDO mapping: " + err);
@@ -374,9 +422,63 @@ std::optional<std::vector<std::uint8_t>> Master::optional_upload(const NodeSetup
   }
 }
 
+void Master::configure_io_module(const NodeSetup& n) {
+  const std::uint8_t id = n.node_id;
+  const std::string who = node_label(id);
+  const std::uint32_t device_type = sdo_upload_u32(id, 0x1000, 0);
+  if (n.device_type && device_type != *n.device_type)
+    throw StartupError(who + ": identity: 0x1000 device type " + hex(device_type, 8) +
+                       ", expected " + hex(*n.device_type, 8));
+  if ((device_type & 0xFFFF) != 401)
+    throw StartupError(who + ": 0x1000 device type " + hex(device_type, 8) +
+                       " is not a CiA 401 I/O module (profile " +
+                       std::to_string(device_type & 0xFFFF) + "), needed by the PLC's cia401 bindings");
+  std::optional<std::vector<std::uint8_t>> name;
+  if (!n.quirks.expedited_only) name = optional_upload(n, 0x1008, 0);
+  log(who + ": CiA 401 I/O module \"" +
+      (name ? std::string(name->begin(), name->end()) : std::string("?")) + "\", type " +
+      hex(device_type, 8));
+  sdo_download_u16(id, 0x1017, 0, n.heartbeat_ms);
+  if (cfg_.master_heartbeat_ms > 0) {
+    const std::uint32_t t = std::min<std::uint32_t>(65535u, 3u * cfg_.master_heartbeat_ms);
+    std::uint8_t b[4];
+    put_u32(b, (static_cast<std::uint32_t>(cfg_.master_node_id) << 16) | t);
+    if (!optional_download(n, 0x1016, 1, b))
+      log(who + ": WARNING: no heartbeat consumer: this module keeps its outputs when the "
+                "master dies");
+  }
+  // Every object the PLC uses, read before it is mapped: a module without it is refused naming
+  // the object, not by an abort on 0x1A00 that says neither which nor why.
+  const IoPdos& p = io_pdos_[static_cast<std::size_t>(index_of(id))];
+  auto need = [&](const PdoEntry& e, bool output) {
+    try {
+      sdo_upload(id, e.index, e.sub);
+    } catch (const SdoAbortError& ex) {
+      if (!ex.from_server()) throw;
+      throw StartupError(who + ": " + object_name(e.index, e.sub) + " (" +
+                         (e.index == 0x6000 || e.index == 0x6200 ? "digital " : "analog ") +
+                         (output ? "output" : "input") +
+                         ", needed by the PLC's cia401 bindings): the module does not provide it "
+                         "(SDO abort " + hex(ex.code(), 8) + " " + sdo_abort_text(ex.code()) + ")");
+    }
+  };
+  for (std::size_t k = 0; k < p.ntx; ++k)
+    for (std::size_t e = 0; e < p.tx[k].count; ++e) need(p.tx[k].entries[e], false);
+  for (std::size_t k = 0; k < p.nrx; ++k)
+    for (std::size_t e = 0; e < p.rx[k].count; ++e) need(p.rx[k].entries[e], true);
+  for (std::uint16_t k = 0; k < p.nrx; ++k) configure_pdo(n, true, p.rx[k], k);
+  disable_pdos(n, true, p.nrx);
+  for (std::uint16_t k = 0; k < p.ntx; ++k) configure_pdo(n, false, p.tx[k], k);
+  disable_pdos(n, false, p.ntx);
+}
+
 void Master::configure_node(const NodeSetup& n) {
   const std::uint8_t id = n.node_id;
   const std::string who = node_label(id);
+  if (n.kind == NodeKind::kIoModule) {
+    configure_io_module(n);
+    return;
+  }
   const std::uint32_t device_type = sdo_upload_u32(id, 0x1000, 0);
   if (n.device_type && device_type != *n.device_type)
     throw StartupError(who + ": identity: 0x1000 device type " + hex(device_type, 8) +
@@ -514,6 +616,16 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
     return;
   }
   const std::uint32_t id = f.id;
+  if (id >= kCobTpdo[0] && id < kCobRpdo[3] && (id & 0x80u) != 0) {
+    // 0x180..0x1FF, 0x280.., 0x380.., 0x480..0x4FF: a TPDO of a CiA 401 module?
+    const auto pdo = static_cast<std::uint16_t>((id - kCobTpdo[0]) >> 8);
+    const std::uint8_t n = node_of(id, kCobTpdo[pdo]);
+    if (const int i = n != 0 ? index_of(n) : -1;
+        i >= 0 && cfg_.nodes[static_cast<std::size_t>(i)].kind == NodeKind::kIoModule) {
+      dispatch_io_tpdo(static_cast<std::size_t>(i), pdo, f, in_cycle);
+      return;
+    }
+  }
   if (std::uint8_t n = node_of(id, kCobTpdo[0]); n != 0 && index_of(n) >= 0) {
     const auto i = static_cast<std::size_t>(index_of(n));
     const auto& m = cfg_.nodes[i].tpdo;
@@ -603,6 +715,56 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
   ++counters_.unknown_frames;
 }
 
+void Master::dispatch_io_tpdo(std::size_t i, std::uint16_t pdo, const CanFrame& f,
+                              bool in_cycle) noexcept {
+  const IoPdos& p = io_pdos_[i];
+  if (pdo >= p.ntx) {
+    ++counters_.unknown_frames;
+    return;
+  }
+  const PdoMapping& m = p.tx[pdo];
+  PdoValues v{};
+  if (f.dlc != m.bytes() || !unpack_pdo(m, f, v)) {
+    ++counters_.malformed_frames;
+    return;
+  }
+  if (!in_cycle) {
+    ++counters_.late_or_stray_frames;
+    return;
+  }
+  NodeRuntime& r = rt_[i];
+  for (std::size_t k = 0; k < m.count; ++k) {
+    const PdoEntry& e = m.entries[k];
+    const std::size_t ch = static_cast<std::size_t>(e.sub) - 1;  // 1..8 (io_module_pdos)
+    if (e.index == 0x6000) r.io_digital_in[ch] = static_cast<std::uint8_t>(v[k] & 0xFF);
+    else r.io_analog_in[ch] = as_i16(v[k]);
+  }
+  r.io_tpdos_in = static_cast<std::uint8_t>(r.io_tpdos_in | (1u << pdo));
+  if (static_cast<unsigned>(r.io_tpdos_in) == (1u << p.ntx) - 1u && !r.tpdo_fresh) {
+    r.tpdo_fresh = true;
+    ++r.tpdo_received;
+  }
+}
+
+void Master::send_io_rpdos(std::size_t i, bool& err) noexcept {
+  const IoPdos& p = io_pdos_[i];
+  const NodeRuntime& r = rt_[i];
+  for (std::size_t k = 0; k < p.nrx; ++k) {
+    const PdoMapping& m = p.rx[k];
+    PdoValues v{};
+    for (std::size_t e = 0; e < m.count; ++e) {
+      const std::size_t ch = static_cast<std::size_t>(m.entries[e].sub) - 1;
+      v[e] = m.entries[e].index == 0x6200 ? r.io_digital_out[ch] : r.io_analog_out[ch];
+    }
+    CanFrame f;
+    f.id = kCobRpdo[k] + cfg_.nodes[i].node_id;
+    pack_pdo(m, v, f);
+    const SendResult s = bus_.send(f);
+    if (s == SendResult::kDropped) ++counters_.tx_dropped;
+    if (s == SendResult::kError) err = true;
+  }
+}
+
 // ------------------------------------------------------------------ RT cycle
 CycleStatus Master::begin_cycle(std::int64_t now_ns) noexcept {
   if (!cycling_) {
@@ -617,8 +779,12 @@ CycleStatus Master::begin_cycle(std::int64_t now_ns) noexcept {
   // so the SYNC below starts a clean collection window.
   CanFrame f;
   while (bus_.receive(f)) dispatch(f, false);
-  for (auto& r : rt_) {
-    r.tpdo_fresh = false;
+  for (std::size_t i = 0; i < rt_.size(); ++i) {
+    auto& r = rt_[i];
+    // A module that maps no input has no TPDO to wait for: fresh by definition (its heartbeat
+    // still watches it).
+    r.tpdo_fresh = cfg_.nodes[i].kind == NodeKind::kIoModule && io_pdos_[i].ntx == 0;
+    r.io_tpdos_in = 0;
     r.digital_inputs_fresh = false;
   }
   sync_mono_ns_ = mono_ns();
@@ -712,6 +878,10 @@ CycleStatus Master::send_rpdos() noexcept {
     auto& r = rt_[i];
     const auto& n = cfg_.nodes[i];
     if (n.sync_every > 1 && cycle % n.sync_every != 0) continue;
+    if (n.kind == NodeKind::kIoModule) {
+      send_io_rpdos(i, err);
+      continue;
+    }
     const bool allow_reset = fault_reset_;
     r.controlword = seq_[i].next(r.state, r.request, allow_reset);
     if (r.state == Cia402State::kOperationEnabled && r.request == DriveRequest::kEnabled)
@@ -857,8 +1027,9 @@ void Master::reset_faults() noexcept {
 }
 
 bool Master::all_enabled() const noexcept {
-  for (const auto& r : rt_)
-    if (r.state != Cia402State::kOperationEnabled) return false;
+  for (std::size_t i = 0; i < rt_.size(); ++i)
+    if (cfg_.nodes[i].kind == NodeKind::kDrive && rt_[i].state != Cia402State::kOperationEnabled)
+      return false;
   return true;
 }
 

@@ -1,5 +1,7 @@
 #pragma once
-// Fixed-function CANopen master for CiA 402 drives (CiA 301 NMT/SDO/PDO/SYNC/EMCY/heartbeat).
+// Fixed-function CANopen master for CiA 402 drives (CiA 301 NMT/SDO/PDO/SYNC/EMCY/heartbeat),
+// and CiA 401 generic I/O modules beside them (NodeKind::kIoModule: no power state machine; their
+// TPDOs are taken in by collect() with the drives', their RPDOs sent by send_rpdos()).
 //
 // Threads: construction, start_up() and the SDO calls are non-RT (they block, allocate, throw
 // StartupError). begin_cycle(), collect(), send_rpdos() and the request setters are the RT
@@ -76,8 +78,28 @@ struct DriveQuirks {
 // {0x1006, 0x1007, 0x1008, 0x1016, 0x605A, 0x6085, 0x60C2}.
 std::span<const std::uint16_t> optional_objects() noexcept;
 
+enum class NodeKind : std::uint8_t { kDrive, kIoModule };
+
+// CiA 401 objects an I/O module node maps: bit k of each mask = sub-index k + 1 is used
+// (0x6000 digital inputs and 0x6200 digital outputs, 8 bits per sub-index; 0x6401 analog inputs
+// and 0x6411 analog outputs, INTEGER16 per sub-index). Only what is used is mapped: inputs into
+// TPDO1.. (digital bytes first, then analog words, in sub-index order, at most 8 bytes a PDO),
+// outputs into RPDO1.. the same way (io_module_pdos()).
+inline constexpr int kIoChannels = 8;
+struct IoModuleMap {
+  std::uint8_t digital_inputs = 0;
+  std::uint8_t digital_outputs = 0;
+  std::uint8_t analog_inputs = 0;
+  std::uint8_t analog_outputs = 0;
+};
+
 struct NodeSetup {
   std::uint8_t node_id = 0;
+  // kIoModule: a CiA 401 module (0x1000 device type profile 401 checked at start-up); `rpdo`,
+  // `tpdo`, `mode`, the quick stop and the digital I/O fields below are not used, `io` says what
+  // is mapped (at least one object).
+  NodeKind kind = NodeKind::kDrive;
+  IoModuleMap io{};
   std::string name;  // "X", "spindle": used in messages
   DriveMode mode = DriveMode::kCsv;
   std::uint16_t heartbeat_ms = 50;
@@ -202,6 +224,14 @@ struct NodeRuntime {
   bool digital_inputs_fresh = false;
   std::uint64_t digital_inputs_missed = 0;  // cycles TPDO2 was due and did not come
   std::uint32_t digital_outputs = 0;        // 0x60FE:01 sent in RPDO2 (masked)
+  // NodeKind::kIoModule: the inputs as last received (sub-index k + 1 at [k]; only the mapped
+  // ones change), which of its TPDOs came this cycle (bit p: TPDO p+1; tpdo_fresh once all
+  // have), and the outputs sent in its RPDOs (set_io_outputs).
+  std::array<std::uint8_t, kIoChannels> io_digital_in{};
+  std::array<std::int16_t, kIoChannels> io_analog_in{};
+  std::array<std::uint8_t, kIoChannels> io_digital_out{};
+  std::array<std::int16_t, kIoChannels> io_analog_out{};
+  std::uint8_t io_tpdos_in = 0;
   // Operation-mode specific controlword bits (4..6, 8) OR'd into the controlword while the drive
   // is in operation enabled and enable is requested (homing: bit 4 "homing operation start").
   std::uint16_t controlword_extra = 0;
@@ -258,6 +288,13 @@ class Master {
   void set_digital_outputs(std::size_t i, std::uint32_t v) noexcept {
     rt_[i].digital_outputs = v & cfg_.nodes[i].digital_output_mask;
   }
+  // CiA 401 outputs of I/O module node i (0x6200:01..08, 0x6411:01..08) for its next RPDOs;
+  // sub-indices it does not map are not sent. RT-safe (copies 24 bytes).
+  void set_io_outputs(std::size_t i, const std::array<std::uint8_t, kIoChannels>& digital,
+                      const std::array<std::int16_t, kIoChannels>& analog) noexcept {
+    rt_[i].io_digital_out = digital;
+    rt_[i].io_analog_out = analog;
+  }
   // Test hook (HIL): stop/resume the master's own heartbeat (the drives consume it, 0x1016), to
   // prove the drives' reaction to a dead master without killing the process. RT-safe.
   void set_heartbeat_producer(bool on) noexcept { heartbeat_on_ = on; }
@@ -304,6 +341,9 @@ class Master {
   void configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m, std::uint16_t k = 0);
   void disable_pdos(const NodeSetup& n, bool rx, std::uint16_t from);
   void check_digital_io(const NodeSetup& n);
+  void configure_io_module(const NodeSetup& n);
+  void dispatch_io_tpdo(std::size_t i, std::uint16_t pdo, const CanFrame& f, bool in_cycle) noexcept;
+  void send_io_rpdos(std::size_t i, bool& err) noexcept;
   // Optional object write/read: skipped when the quirks list it; a 0x06020000/0x06090011 abort
   // from the drive is logged and skipped. Returns whether the transfer happened.
   bool optional_download(const NodeSetup& n, std::uint16_t index, std::uint8_t sub,
@@ -325,6 +365,11 @@ class Master {
   std::vector<NodeRuntime> rt_;
   std::vector<Cia402Sequencer> seq_;
   std::vector<PositionUnwrapper> unwrap_;
+  struct IoPdos {
+    std::array<PdoMapping, 4> tx{}, rx{};
+    std::uint8_t ntx = 0, nrx = 0;
+  };
+  std::vector<IoPdos> io_pdos_;  // per node (empty mappings for drives)
   std::array<std::int16_t, 128> index_by_node_{};
   std::vector<bool> booted_;
   MasterCounters counters_{};
@@ -350,5 +395,8 @@ PdoMapping default_tpdo();
 // RPDO2 {0x60FE:01}.
 PdoMapping digital_inputs_tpdo();
 PdoMapping digital_outputs_rpdo();
+// The PDOs of a CiA 401 module (IoModuleMap): TPDOs (rx false) or RPDOs (rx true), in order,
+// each at most 8 bytes; empty when the direction maps nothing.
+std::vector<PdoMapping> io_module_pdos(const IoModuleMap& io, bool rx);
 
 }  // namespace contour::drivers::canopen
