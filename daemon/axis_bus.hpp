@@ -10,12 +10,16 @@
 // Units at this interface are machine units (mm, mm/s): the CANopen implementation scales counts
 // at its edge.
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <string>
 
 namespace contour::daemon {
 
 inline constexpr int kMaxAxes = 3;
+// CiA 401 I/O modules on the bus (the PLC's cia401 bindings) and channels per object.
+inline constexpr std::size_t kMaxIoModules = 8;
+inline constexpr std::size_t kIoModuleChannels = 8;
 
 enum class DriveMode : std::uint8_t { kDisabled, kEnabled, kQuickStop };
 
@@ -79,6 +83,27 @@ struct SpindleFeedback {
   bool fault = false;
 };
 
+// A CiA 401 I/O module as this cycle's read saw it (CANopen: nodes the PLC's cia401 bindings
+// name; other buses have none). `fresh`: every TPDO the module maps arrived this cycle (a module
+// that maps no input is always fresh: only its heartbeat watches it). `missed_streak`: cycles in
+// a row without them (the master's count, cleared by acknowledge_faults()). `emcy_code` (0:
+// none) and `nmt_lost` are latched like a drive's. The values are the last received.
+struct IoModuleFeedback {
+  int node_id = 0;
+  bool fresh = false;
+  std::uint32_t missed_streak = 0;
+  std::uint16_t emcy_code = 0;
+  bool nmt_lost = false;
+  std::array<std::uint8_t, kIoModuleChannels> digital{};  // 0x6000:01..08
+  std::array<std::int16_t, kIoModuleChannels> analog{};   // 0x6401:01..08
+};
+// Its outputs for this cycle's write (0x6200:01..08, 0x6411:01..08); node_id 0: unused slot.
+struct IoModuleCommands {
+  int node_id = 0;
+  std::array<std::uint8_t, kIoModuleChannels> digital{};
+  std::array<std::int16_t, kIoModuleChannels> analog{};
+};
+
 struct BusFeedback {
   std::array<AxisFeedback, kMaxAxes> axis{};
   SpindleFeedback spindle{};
@@ -87,6 +112,8 @@ struct BusFeedback {
   int heartbeat_lost_node = 0;
   bool bus_error = false;       // bus-off / error-passive
   std::uint32_t emcy_count = 0; // EMCY frames received so far
+  std::array<IoModuleFeedback, kMaxIoModules> io{};
+  int io_modules = 0;
 };
 
 struct AxisCommands {
@@ -106,6 +133,8 @@ struct AxisCommands {
   // the result (AxisFeedback::drive_homing), false returns the drive to the cyclic mode (an
   // unfinished homing is abandoned: the drive stops under the velocity command).
   std::array<bool, kMaxAxes> drive_home{};
+  // CiA 401 module outputs (the PLC's cia401 output bindings), matched by node_id.
+  std::array<IoModuleCommands, kMaxIoModules> io{};
 };
 
 class AxisBus {

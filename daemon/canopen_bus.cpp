@@ -63,6 +63,14 @@ void CanopenBus::init(const config::Config& cfg) {
   axes_ = static_cast<int>(axes.size());
   mcfg_ = master_config_from(cfg);  // axes first, in machine order, then the spindle
   for (std::size_t i = 0; i < mcfg_.nodes.size(); ++i) {
+    if (mcfg_.nodes[i].kind == co::NodeKind::kIoModule) {
+      if (io_count_ >= static_cast<int>(kMaxIoModules)) {
+        throw std::runtime_error(cfg.source + ": plc.signals: more than " +
+                                 std::to_string(kMaxIoModules) + " CiA 401 I/O modules");
+      }
+      io_index_[static_cast<std::size_t>(io_count_++)] = static_cast<int>(i);
+      continue;
+    }
     if (mcfg_.nodes[i].name == "spindle") spindle_index_ = static_cast<int>(i);
   }
   spindle_velocity_mapped_ =
@@ -171,6 +179,8 @@ void CanopenBus::run_cycles_for_stop() noexcept {
       master_->set_target(i, 0);
       master_->set_digital_outputs(i, 0);  // the PLC's drive outputs off with the drives
     }
+    for (int m = 0; m < io_count_; ++m)  // and the CiA 401 modules' outputs
+      master_->set_io_outputs(static_cast<std::size_t>(io_index_[static_cast<std::size_t>(m)]), {}, {});
     master_->send_rpdos();
     if ((!powered && k > 2) || silent > 3) break;
     if (!lockstep_) {
@@ -271,6 +281,19 @@ void CanopenBus::read(BusFeedback& fb) noexcept {
               r.state == co::Cia402State::kFaultReactionActive ||
               (r.faults & static_cast<std::uint8_t>(co::NodeFault::kDriveFault)) != 0;
   }
+  fb.io_modules = io_count_;
+  for (int k = 0; k < io_count_; ++k) {
+    const auto i = static_cast<std::size_t>(io_index_[static_cast<std::size_t>(k)]);
+    const co::NodeRuntime& r = master_->node(i);
+    IoModuleFeedback& m = fb.io[static_cast<std::size_t>(k)];
+    m.node_id = master_->setup(i).node_id;
+    m.fresh = r.tpdo_fresh;
+    m.missed_streak = r.missed_streak;
+    m.emcy_code = r.emcy_code;
+    m.nmt_lost = r.nmt_lost;
+    m.digital = r.io_digital_in;
+    m.analog = r.io_analog_in;
+  }
   if (spindle_index_ >= 0) {
     const co::NodeRuntime& r = master_->node(static_cast<std::size_t>(spindle_index_));
     SpindleFeedback& s = fb.spindle;
@@ -323,6 +346,12 @@ void CanopenBus::write(const AxisCommands& cmd) noexcept {
                             : cmd.mode == DriveMode::kEnabled ? co::DriveRequest::kEnabled
                                                               : co::DriveRequest::kDisabled);
     master_->set_target(s, co::mm_s_to_counts_s(rpm, 1.0));  // rounds and saturates
+  }
+  for (const IoModuleCommands& o : cmd.io) {
+    if (o.node_id <= 0 || o.node_id > 127) continue;
+    const int i = master_->index_of(static_cast<std::uint8_t>(o.node_id));
+    if (i < 0 || master_->setup(static_cast<std::size_t>(i)).kind != co::NodeKind::kIoModule) continue;
+    master_->set_io_outputs(static_cast<std::size_t>(i), o.digital, o.analog);
   }
   master_->send_rpdos();
 }
@@ -462,7 +491,7 @@ std::string CanopenBus::describe() const {
   std::string s = "CANopen over SocketCAN " + ifname_ + ", axes on nodes";
   for (std::size_t i = 0; i < mcfg_.nodes.size(); ++i) {
     const auto& n = mcfg_.nodes[i];
-    if (static_cast<int>(i) == spindle_index_) continue;
+    if (static_cast<int>(i) == spindle_index_ || n.kind == co::NodeKind::kIoModule) continue;
     s += " " + std::to_string(n.node_id) + "(" + n.name;
     // Only a profile other than the default is worth a word here (the start-up log has all).
     if (n.quirks.profile != "generic") s += ", drive profile " + n.quirks.profile;
@@ -471,6 +500,11 @@ std::string CanopenBus::describe() const {
   if (spindle_index_ >= 0) {
     s += ", spindle node " +
          std::to_string(mcfg_.nodes[static_cast<std::size_t>(spindle_index_)].node_id);
+  }
+  if (io_count_ > 0) {
+    s += ", CiA 401 I/O modules on nodes";
+    for (int k = 0; k < io_count_; ++k)
+      s += " " + std::to_string(mcfg_.nodes[static_cast<std::size_t>(io_index_[static_cast<std::size_t>(k)])].node_id);
   }
   if (lockstep_) s += ", lockstep (simulated drives)";
   return s;

@@ -16,6 +16,9 @@
 //   digital I/O (axes a plc.signals cia402 binding names; daemon/PLC.md "Drive I/O"): 0x60FD
 //   from TPDO2 -> AxisFeedback::digital_inputs (present, fresh when TPDO2 came this cycle);
 //   AxisCommands::digital_outputs & mask -> 0x60FE:01 in RPDO2; 0 on stop()
+//   CiA 401 I/O modules (nodes plc.signals cia401 bindings name; daemon/PLC.md "CAN I/O
+//   modules"): their TPDOs -> BusFeedback::io (0x6000:xx, 0x6401:xx), AxisCommands::io ->
+//   their RPDOs (0x6200:xx, 0x6411:xx), matched by node-id; 0 on stop()
 // DriveMode -> CiA 402 request for every axis node (the master's sequencer walks the power state
 // machine one controlword per cycle): kEnabled -> enable operation, kDisabled -> disable
 // voltage, kQuickStop -> quick stop. A change from not-enabled to kEnabled sends the fault-reset
@@ -145,6 +148,9 @@ class CanopenBus final : public AxisBus {
   bool lockstep_ = false;
   int axes_ = 0;
   int spindle_index_ = -1;  // node index of the spindle in the master, or -1
+  // CiA 401 I/O modules (the PLC's cia401 bindings): their node indices in the master.
+  std::array<int, kMaxIoModules> io_index_{};
+  int io_count_ = 0;
   bool spindle_velocity_mapped_ = false;  // 0x606C in the spindle's TPDO: speed feedback
   std::array<double, kMaxAxes> counts_per_mm_{};
   std::array<bool, kMaxAxes> velocity_mapped_{};  // 0x606C in the axis' TPDO

@@ -57,6 +57,51 @@ inline void add_digital_io(const config::Config& cfg, drivers::canopen::MasterCo
   }
 }
 
+// The PLC's cia401 bindings (plc.signals) -> one CiA 401 I/O module node per node-id, after the
+// drives, in the order the signals first name them; each maps only the sub-indices the signals
+// use (IoModuleMap). Heartbeat and transmission type: bus.drives' (heartbeat_ms,
+// heartbeat_timeout_ms, sync_every). A node-id that is also a drive's is a ConfigError naming
+// the signal.
+inline void add_io_modules(const config::Config& cfg, drivers::canopen::MasterConfig& c) {
+  namespace co = drivers::canopen;
+  if (!cfg.plc.present) return;
+  const std::size_t drives = c.nodes.size();
+  for (const auto& sig : cfg.plc.signals) {
+    const auto& b = sig.binding;
+    if (b.kind != config::PlcBindingKind::kCia401) continue;
+    if (b.address < 1 || b.address > co::kIoChannels) continue;  // the engine refuses it
+    co::NodeSetup* n = nullptr;
+    for (std::size_t i = 0; i < c.nodes.size(); ++i) {
+      if (c.nodes[i].node_id != b.node_id) continue;
+      if (i < drives) {
+        throw config::ConfigError({sig.where + ": plc.signals '" + sig.name + "': cia401.node " +
+                                   std::to_string(b.node_id) + " is the node of drive '" +
+                                   c.nodes[i].name + "'"});
+      }
+      n = &c.nodes[i];
+    }
+    if (n == nullptr) {
+      co::NodeSetup s;
+      s.kind = co::NodeKind::kIoModule;
+      s.node_id = static_cast<std::uint8_t>(b.node_id);
+      s.name = "I/O module";
+      s.heartbeat_ms = static_cast<std::uint16_t>(cfg.bus.drive_defaults.heartbeat_ms);
+      s.heartbeat_timeout_ms = static_cast<std::uint16_t>(cfg.bus.drive_defaults.heartbeat_timeout_ms);
+      s.sync_every = static_cast<std::uint8_t>(cfg.bus.drive_defaults.sync_every);
+      s.quirks.profile = "cia401";
+      c.nodes.push_back(s);
+      n = &c.nodes.back();
+    }
+    const auto bit = static_cast<std::uint8_t>(1u << (b.address - 1));
+    switch (b.object) {
+      case config::Cia401Object::kDigitalInput: n->io.digital_inputs |= bit; break;
+      case config::Cia401Object::kDigitalOutput: n->io.digital_outputs |= bit; break;
+      case config::Cia401Object::kAnalogInput: n->io.analog_inputs |= bit; break;
+      case config::Cia401Object::kAnalogOutput: n->io.analog_outputs |= bit; break;
+    }
+  }
+}
+
 // Throws config::ConfigError (duplicate node-ids, ...).
 inline drivers::canopen::MasterConfig master_config_from(const config::Config& cfg) {
   using drivers::canopen::DriveMode;
@@ -97,6 +142,7 @@ inline drivers::canopen::MasterConfig master_config_from(const config::Config& c
     c.nodes.push_back(s);
   }
   add_digital_io(cfg, c);
+  add_io_modules(cfg, c);
   return c;
 }
 

@@ -106,7 +106,10 @@ std::string describe(const RtEvent& e) {
     case EventKind::kFault:
       o << "FAULT " << to_string(e.cause);
       // For a heartbeat loss the field carries the CANopen node-id, not an axis index.
-      if (e.axis >= 0) o << (e.cause == FaultCause::kHeartbeatLost ? " node " : " axis ") << e.axis;
+      if (e.axis >= 0)
+        o << (e.cause == FaultCause::kHeartbeatLost || e.cause == FaultCause::kIoModule ? " node "
+                                                                                         : " axis ")
+          << e.axis;
       if (e.cause == FaultCause::kFollowingError || e.cause == FaultCause::kContourError) {
         o << ": " << e.value << " mm > limit " << e.limit << " mm";
       } else if (e.cause == FaultCause::kSoftLimit) {
@@ -120,6 +123,16 @@ std::string describe(const RtEvent& e) {
         char code[16];
         std::snprintf(code, sizeof code, "0x%04X", static_cast<unsigned>(e.value));
         o << ": EMCY code " << code << " (see the CANopen log line)";
+      } else if (e.cause == FaultCause::kIoModule) {
+        if (e.detail == static_cast<std::uint8_t>(IoModuleFault::kTpdoMissed)) {
+          o << ": " << e.value << " missed TPDOs in a row (CiA 401 inputs)";
+        } else if (e.detail == static_cast<std::uint8_t>(IoModuleFault::kEmcy)) {
+          char code[16];
+          std::snprintf(code, sizeof code, "0x%04X", static_cast<unsigned>(e.value));
+          o << ": EMCY code " << code << " (see the CANopen log line)";
+        } else {
+          o << ": no longer NMT operational";
+        }
       } else if (e.cause == FaultCause::kNmtStateChange) {
         o << ": node " << e.value << " is no longer NMT operational";
       } else if (e.cause == FaultCause::kLimitCycle) {

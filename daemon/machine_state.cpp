@@ -40,6 +40,7 @@ std::string_view to_string(FaultCause c) noexcept {
     case FaultCause::kLimitCycle: return "limit cycle";
     case FaultCause::kPlcEstop: return "machine logic E-stop";
     case FaultCause::kPlcFault: return "machine logic fault";
+    case FaultCause::kIoModule: return "I/O module fault";
     case FaultCause::kInternal: return "internal error";
   }
   return "?";

@@ -39,6 +39,8 @@ enum class FaultCause : std::uint8_t {
   kPlcEstop,           // the machine logic requested an E-stop (issue 20)
   kPlcFault,           // the machine logic requested a fault, or its engine latched one (I/O
                        // stale, M-code / tool-change timeout, scan error)
+  kIoModule,           // a CiA 401 I/O module of the PLC: TPDOs missing, EMCY, or it left NMT
+                       // operational (FaultReport::axis: the node-id; detail: IoModuleFault)
   kInternal,
 };
 inline constexpr std::size_t kFaultCauseCount = static_cast<std::size_t>(FaultCause::kInternal) + 1;

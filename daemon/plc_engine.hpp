@@ -52,12 +52,13 @@
 
 namespace contour::daemon {
 
-inline constexpr std::size_t kMaxCia401Nodes = 8;
-inline constexpr int kCia401Subs = 8;  // sub-indices 1..8 of 0x6000/0x6200/0x6401/0x6411
+inline constexpr std::size_t kMaxCia401Nodes = kMaxIoModules;
+inline constexpr int kCia401Subs = static_cast<int>(kIoModuleChannels);  // sub-indices 1..8
 
-// One CiA 401 module's process data as the CANopen master maps it (TPDO -> inputs,
-// outputs -> RPDO). Phase 2: drivers/canopen maps 0x6000:01..08, 0x6401:01..08 into TPDOs and
-// 0x6200:01..08, 0x6411:01..08 into RPDOs of the nodes the PLC names (Cia401Map).
+// One CiA 401 module's process data as the CANopen master maps it (its TPDOs -> inputs,
+// outputs -> its RPDOs): drivers/canopen maps the sub-indices of 0x6000/0x6401 (inputs) and
+// 0x6200/0x6411 (outputs) the PLC's signals use (daemon/canopen_master_config.hpp
+// add_io_modules); ServoLoop copies BusFeedback::io in and AxisCommands::io out.
 struct Cia401Inputs {
   std::uint8_t node_id = 0;
   bool valid = false;  // a TPDO arrived recently (else the PLC uses the signals' defaults)

@@ -97,6 +97,7 @@ std::string describe(const ResetBlock& b) {
       return "the drive of " + who + " is not NMT operational";
     case FaultCause::kSpindleFault: return "the spindle drive still reports a fault";
     case FaultCause::kBusError: return "the CAN bus is still in error (bus-off / error passive)";
+    case FaultCause::kIoModule: return "the CiA 401 I/O module " + who + " is not NMT operational";
     case FaultCause::kEstopInput: return "the E-stop input is still asserted";
     case FaultCause::kPlcFault:
     case FaultCause::kPlcEstop:
@@ -129,6 +130,11 @@ FaultReport SafetySupervisor::check_bus(const Feedback& fb, bool servo) const no
   // The common case first, in one pass: nothing below can fire (the order of the causes only
   // matters when one does).
   bool any = fb.bus.spindle.fault || fb.bus.heartbeat_lost || fb.bus.bus_error;
+  for (int k = 0; k < fb.bus.io_modules; ++k) {
+    const IoModuleFeedback& m = fb.bus.io[static_cast<std::size_t>(k)];
+    any = any || m.nmt_lost || m.emcy_code != 0 ||
+          m.missed_streak >= static_cast<std::uint32_t>(missed_tpdo_streak_);
+  }
   for (int i = 0; i < axes_; ++i) {
     const AxisFeedback& ax = fb.bus.axis[static_cast<std::size_t>(i)];
     any = any || ax.fault || ax.nmt_lost || (servo && ax.fresh && !ax.enabled) ||
@@ -155,7 +161,25 @@ FaultReport SafetySupervisor::check_bus(const Feedback& fb, bool servo) const no
     if (disabled) return {FaultCause::kDriveDisabled, i, 1.0, 0.0};
   }
   if (fb.bus.spindle.fault) return {FaultCause::kSpindleFault, -1, fb.bus.spindle.actual_rpm, 0.0};
+  // A CiA 401 module of the PLC (its inputs would go stale, its outputs unheard): what it said
+  // (NMT change, EMCY) before what the master inferred (TPDOs missing), as for the drives. The
+  // report's axis is the node-id, as for a heartbeat loss.
+  for (int k = 0; k < fb.bus.io_modules; ++k) {
+    const IoModuleFeedback& m = fb.bus.io[static_cast<std::size_t>(k)];
+    if (m.nmt_lost)
+      return {FaultCause::kIoModule, m.node_id, 0.0, 0.0, static_cast<std::uint8_t>(IoModuleFault::kNmt)};
+    if (m.emcy_code != 0)
+      return {FaultCause::kIoModule, m.node_id, static_cast<double>(m.emcy_code), 0.0,
+              static_cast<std::uint8_t>(IoModuleFault::kEmcy)};
+  }
   if (fb.bus.heartbeat_lost) return {FaultCause::kHeartbeatLost, fb.bus.heartbeat_lost_node, 1.0, 0.0};
+  for (int k = 0; k < fb.bus.io_modules; ++k) {
+    const IoModuleFeedback& m = fb.bus.io[static_cast<std::size_t>(k)];
+    if (m.missed_streak >= static_cast<std::uint32_t>(missed_tpdo_streak_))
+      return {FaultCause::kIoModule, m.node_id, static_cast<double>(m.missed_streak),
+              static_cast<double>(missed_tpdo_streak_),
+              static_cast<std::uint8_t>(IoModuleFault::kTpdoMissed)};
+  }
   if (fb.bus.bus_error) return {FaultCause::kBusError, -1, 1.0, 0.0};
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
@@ -209,6 +233,10 @@ ResetBlock SafetySupervisor::reset_block(const Feedback& fb, bool estop_tripped)
   }
   if (fb.bus.spindle.fault) return {FaultCause::kSpindleFault, -1, 0};
   if (fb.bus.heartbeat_lost) return {FaultCause::kHeartbeatLost, -1, fb.bus.heartbeat_lost_node};
+  for (int k = 0; k < fb.bus.io_modules; ++k) {
+    const IoModuleFeedback& m = fb.bus.io[static_cast<std::size_t>(k)];
+    if (m.nmt_lost) return {FaultCause::kIoModule, -1, m.node_id};
+  }
   if (fb.bus.bus_error) return {FaultCause::kBusError, -1, 0};
   return {};
 }

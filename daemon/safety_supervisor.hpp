@@ -51,6 +51,9 @@ void validate(const LiveLimits& l, int axes);
 // growing linearly to FERROR at the axis' maximum velocity.
 double following_band_mm(const LiveLimits& l, int axis, double v_ref_mm_s) noexcept;
 
+// FaultCause::kIoModule: what the CiA 401 module did (FaultReport::detail).
+enum class IoModuleFault : std::uint8_t { kNone, kTpdoMissed, kEmcy, kNmt };
+
 struct FaultReport {
   FaultCause cause = FaultCause::kNone;
   int axis = -1;  // -1: not an axis (spindle, bus, contour); heartbeat: the node-id

@@ -44,18 +44,19 @@ ServoLoop::ServoLoop(const config::Config& cfg, AxisBus& bus, std::size_t event_
       telemetry_(static_cast<std::size_t>(cfg.telemetry.ring_capacity)) {
   axes_ = static_cast<int>(cfg.machine.axes.size());
   if (axes_ < 1 || axes_ > 3) throw std::invalid_argument("servo loop: 1 to 3 axes");
-  // The PLC engine reads CiA 401 modules from the loop's feedback, which no bus maps into its
-  // PDOs yet: such a signal would sit at its default forever. Refused at start-up instead of
-  // ignored. (CiA 402 drive I/O, 0x60FD/0x60FE, is mapped: AxisFeedback/AxisCommands.)
-  if (cfg.plc.present) {
+  // The PLC engine reads CiA 401 modules from the loop's feedback (BusFeedback::io), which the
+  // CANopen bus fills. The in-process sim bus has no CAN I/O modules: such a signal would sit at
+  // its default forever, so it is refused at start-up instead of ignored.
+  if (cfg.plc.present && cfg.bus.type == "sim") {
     for (const auto& sig : cfg.plc.signals) {
       if (sig.binding.kind != config::PlcBindingKind::kCia401) continue;
       throw std::invalid_argument(
           sig.where + ": plc signal '" + sig.name +
-          "': cia401 (CAN I/O module) bindings are not mapped by the CANopen master yet: bind "
-          "the signal to gpio, modbus, cia402 or sim");
+          "': cia401 (CAN I/O module) bindings need the CANopen bus (bus.type socketcan): the "
+          "sim bus has no CiA 401 modules; bind the signal to sim, gpio, modbus or cia402");
     }
   }
+  io_age_.fill(kDriveInputsNever);
   drive_inputs_max_age_ = cfg.safety.missed_tpdo_streak > 0 ? cfg.safety.missed_tpdo_streak : 1;
   period_s_ = cfg.machine.period_s;
   for (std::size_t i = 0; i < 3 && i < cfg.machine.axes.size(); ++i) {
@@ -642,6 +643,17 @@ void ServoLoop::logic() noexcept {
     in.drive_inputs_valid[a] = fb_.bus.axis[a].digital_inputs_present &&
                                drive_inputs_age_[a] < drive_inputs_max_age_;
   }
+  // CiA 401 modules: the same rule as 0x60FD (held below the missed-TPDO streak, then stale).
+  for (int k = 0; k < fb_.bus.io_modules && k < static_cast<int>(kMaxIoModules); ++k) {
+    const auto m = static_cast<std::size_t>(k);
+    Cia401Inputs& c = cia401_in_[m];
+    c.node_id = static_cast<std::uint8_t>(fb_.bus.io[m].node_id);
+    c.valid = io_age_[m] < drive_inputs_max_age_;
+    c.digital = fb_.bus.io[m].digital;
+    c.analog = fb_.bus.io[m].analog;
+  }
+  in.cia401 = std::span<const Cia401Inputs>(
+      cia401_in_.data(), static_cast<std::size_t>(std::clamp(fb_.bus.io_modules, 0, static_cast<int>(kMaxIoModules))));
   plc_->scan(in, plc_out_);
   const PlcRequests& rq = plc_out_.requests;
   plc_req_ = rq;
@@ -764,6 +776,14 @@ void ServoLoop::read() noexcept {
       drive_inputs_age_[a] = 0;
     } else if (drive_inputs_age_[a] < kDriveInputsNever) {
       ++drive_inputs_age_[a];
+    }
+  }
+  for (int k = 0; k < fb_.bus.io_modules && k < static_cast<int>(kMaxIoModules); ++k) {
+    const auto m = static_cast<std::size_t>(k);
+    if (fb_.bus.io[m].fresh) {
+      io_age_[m] = 0;
+    } else if (io_age_[m] < kDriveInputsNever) {
+      ++io_age_[m];
     }
   }
   if (io_ != nullptr) {
@@ -1116,6 +1136,17 @@ void ServoLoop::write(const AxisCommands& out) noexcept {
   if (plc_ != nullptr) {
     out_.digital_outputs = plc_out_.drive_outputs;
     out_.digital_output_mask = plc_out_.drive_output_mask;
+    // CiA 401 outputs (0x6200, 0x6411), matched by node-id in the bus.
+    for (std::size_t k = 0; k < kMaxIoModules; ++k) {
+      IoModuleCommands& c = out_.io[k];
+      if (k < plc_out_.cia401_count && k < kMaxCia401Nodes) {
+        c.node_id = plc_out_.cia401[k].node_id;
+        c.digital = plc_out_.cia401[k].digital;
+        c.analog = plc_out_.cia401[k].analog;
+      } else {
+        c.node_id = 0;
+      }
+    }
   }
   bus_.write(out_);
 }

@@ -490,6 +490,10 @@ class ServoLoop {
   static constexpr int kDriveInputsNever = 1 << 30;
   std::array<int, kMaxAxes> drive_inputs_age_{kDriveInputsNever, kDriveInputsNever, kDriveInputsNever};
   int drive_inputs_max_age_ = 3;
+  // CiA 401 modules (BusFeedback::io, slot k): cycles since their TPDOs last came in full (the
+  // same staleness rule as 0x60FD), and the PLC's view of them (PlcNcInput::cia401).
+  std::array<int, kMaxIoModules> io_age_{};
+  std::array<Cia401Inputs, kMaxIoModules> cia401_in_{};
   PlcRequests plc_req_{};  // this cycle's requests (commands use the previous cycle's)
   PlcFault plc_engine_fault_{};
   PlcStopCause plc_cause_{};
