@@ -7,6 +7,12 @@
 // positive_limit and home_switch switches at its soft limits; --input-switch
 // NODE:BIT:above|below:POS_MM adds one (bit on while the position is above/below POS_MM).
 // 0x60FE:01 (digital outputs) is stored and readable over SDO.
+// CiA 401 I/O modules (sim_drive.hpp SimIoModule): --io-module NODE[:DI:DO:AI:AO] adds one
+// (DI/DO bytes of 0x6000/0x6200, AI/AO INTEGER16 channels of 0x6401/0x6411, 0..8 each, default
+// 2:2:2:2); its outputs are looped to its inputs each SYNC; --io-input NODE:SUB:VALUE pins
+// 0x6000:SUB to VALUE (not looped). The fault and quirk flags (--drop-tpdo, --stop-heartbeat,
+// --missing-object, --pdos, ...) take its node-id too. The summary's node entry shows its
+// objects: "io": {"0x6000": [...], "0x6200": [...], "0x6401": [...], "0x6411": [...]}.
 // The simulated machine for HIL: one process answering every bus node of the config (axes from
 // machine.axes[].node_id, the spindle from bus.spindle.node_id) as CiA 402 drives on SocketCAN,
 // advancing one plant step per SYNC (lockstep). Prints "ready: ..." on stdout once listening and a
@@ -75,6 +81,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> drop, fault, fault_motion, stop_hb, sdo_abort, malformed, drop_sdo;
   std::vector<std::string> missing_obj, pdos, tpdo_sampling;
   std::vector<long> expedited_only;
+  std::vector<std::string> io_modules, io_inputs;
   app.add_option("--config", config_path, "contourd YAML config (machine, bus)")->required();
   app.add_option("--can", iface, "CAN interface, e.g. vcan0")->required();
   app.add_option("--modbus", modbus, "HOST:PORT of the dynamometer Modbus TCP server");
@@ -100,6 +107,12 @@ int main(int argc, char** argv) {
   app.add_option("--tpdo-sampling", tpdo_sampling,
                  "NODE:sync|after_step when the node samples its TPDO: at SYNC before its step, "
                  "or after it (default: tpdo_sampling of the node's drive profile)");
+  app.add_option("--io-module", io_modules,
+                 "NODE[:DI:DO:AI:AO] a CiA 401 I/O module: DI/DO bytes (0x6000/0x6200), AI/AO "
+                 "16-bit channels (0x6401/0x6411), 0..8 each (default 2:2:2:2); outputs looped "
+                 "to inputs");
+  app.add_option("--io-input", io_inputs,
+                 "NODE:SUB:VALUE pin the I/O module's 0x6000:SUB to the byte VALUE (not looped)");
   std::string hb_consumer = "sync";
   app.add_option("--hb-consumer", hb_consumer,
                  "sync|wall how every node times the master's heartbeat (0x1016): in SYNCs "
@@ -255,6 +268,31 @@ int main(int argc, char** argv) {
     }
     setups.push_back(s);
   }
+  const std::size_t drive_count = setups.size();
+  try {
+    for (const auto& d : io_modules) {
+      auto v = parse_tuple(d, 1, 5, "--io-module");
+      if (v[0] < 1 || v[0] > 127) throw CLI::ValidationError("--io-module", "node-id 1..127 in '" + d + "'");
+      for (std::size_t k = 1; k < v.size(); ++k)
+        if (v[k] < 0 || v[k] > 8) throw CLI::ValidationError("--io-module", "counts 0..8 in '" + d + "'");
+      for (const auto& s : setups)
+        if (s.node_id == v[0])
+          throw CLI::ValidationError("--io-module", "node-id " + std::to_string(v[0]) + " is already simulated");
+      contour::sim::SimDriveSetup s;
+      s.node_id = static_cast<std::uint8_t>(v[0]);
+      s.name = "io" + std::to_string(v[0]);
+      s.period_s = cfg.machine.period_s;
+      s.quirks.wall_clock_consumer = hb_consumer == "wall";
+      s.io.enabled = true;
+      if (v.size() > 1) s.io.digital_inputs = static_cast<int>(v[1]);
+      if (v.size() > 2) s.io.digital_outputs = static_cast<int>(v[2]);
+      if (v.size() > 3) s.io.analog_inputs = static_cast<int>(v[3]);
+      if (v.size() > 4) s.io.analog_outputs = static_cast<int>(v[4]);
+      setups.push_back(s);
+    }
+  } catch (const CLI::Error& e) {
+    return app.exit(e);
+  }
   try {
     auto find = [&](long node) -> contour::sim::SimDriveSetup& {
       for (auto& s : setups)
@@ -313,6 +351,13 @@ int main(int argc, char** argv) {
       if (v.size() > 2) s.quirks.pdo_max_entries = static_cast<int>(v[2]);
     }
     for (long n : expedited_only) find(n).quirks.expedited_only = true;
+    for (const auto& d : io_inputs) {
+      auto v = parse_tuple(d, 3, 3, "--io-input");
+      auto& s = find(v[0]);
+      if (!s.io.enabled || v[1] < 1 || v[1] > s.io.digital_inputs || v[2] < 0 || v[2] > 255)
+        throw CLI::ValidationError("--io-input", "NODE must be an --io-module, SUB 1..its DI bytes, VALUE 0..255: '" + d + "'");
+      s.io.fixed_inputs.emplace_back(static_cast<int>(v[1]), static_cast<int>(v[2]));
+    }
     for (const auto& d : input_switch) {
       // NODE:BIT:above|below:POS_MM (the position is a decimal, not parse_tuple's integer).
       const auto c1 = d.find(':');
@@ -365,6 +410,10 @@ int main(int argc, char** argv) {
     for (const auto& s : setups) {
       filters.push_back({0x200u + s.node_id, 0x7FF});
       filters.push_back({0x300u + s.node_id, 0x7FF});  // RPDO2: 0x60FE:01 (drive digital outputs)
+      if (s.io.enabled) {  // a CiA 401 module's outputs may take RPDO3/4
+        filters.push_back({0x400u + s.node_id, 0x7FF});
+        filters.push_back({0x500u + s.node_id, 0x7FF});
+      }
       filters.push_back({0x600u + s.node_id, 0x7FF});
     }
     bus = std::make_unique<contour::drivers::SocketCan>(iface, filters);
@@ -395,7 +444,7 @@ int main(int argc, char** argv) {
         cfg.dynamometer.reader.transport.response_timeout);
     ss.modbus_no_reply = 5 * std::max(std::chrono::milliseconds(1), reader_timeout);
     std::vector<contour::sim::StormNode> sn;
-    for (std::size_t i = 0; i < drives.size(); ++i) {
+    for (std::size_t i = 0; i < drive_count; ++i) {  // the drives, not the I/O modules
       contour::sim::StormNode n;
       n.drive = drives[i].get();
       n.axis = !setups[i].spindle;
@@ -443,7 +492,7 @@ int main(int argc, char** argv) {
       std::array<double, 3> axis_mm{};
       std::size_t a = 0;
       for (const auto& d : drives)
-        if (!d->is_spindle() && a < 3) axis_mm[a++] = d->position_mm();
+        if (!d->is_spindle() && !d->is_io_module() && a < 3) axis_mm[a++] = d->position_mm();
       plant->step(drives.front()->syncs(), axis_mm);
       pollfd in{0, POLLIN, 0};
       if (stdin_open && ::poll(&in, 1, 0) == 1) {
@@ -466,6 +515,7 @@ int main(int argc, char** argv) {
     if (dyno) {
       double v2 = 0.0, rpm = 0.0;
       for (const auto& d : drives) {
+        if (d->is_io_module()) continue;
         if (d->is_spindle()) {
           rpm = d->spindle_rpm();
         } else {
@@ -490,7 +540,17 @@ int main(int argc, char** argv) {
     n["node_id"] = d->node_id();
     n["syncs"] = d->syncs();
     n["position_mm"] = d->position_mm();
-    n["state"] = contour::drivers::canopen::cia402_state_name(d->state());
+    if (d->is_io_module()) {
+      nlohmann::json io;
+      io["0x6000"] = d->io_values(0x6000);
+      io["0x6200"] = d->io_values(0x6200);
+      io["0x6401"] = d->io_values(0x6401);
+      io["0x6411"] = d->io_values(0x6411);
+      n["io"] = io;
+      n["nmt"] = contour::drivers::canopen::nmt_state_name(d->nmt());
+    } else {
+      n["state"] = contour::drivers::canopen::cia402_state_name(d->state());
+    }
     j["nodes"].push_back(n);
   }
   if (storm) j["storm"] = storm->summary();

@@ -18,10 +18,12 @@ std::vector<std::uint8_t> le(std::int64_t v, std::size_t n) {
   return out;
 }
 bool rx_mappable(std::uint16_t i, std::uint8_t sub) {
+  if (i == 0x6200 || i == 0x6411) return sub >= 1;  // CiA 401 outputs (I/O module)
   if (i == 0x60FE) return sub == 1;  // digital outputs, physical outputs
   return sub == 0 && (i == 0x6040 || i == 0x607A || i == 0x60FF || i == 0x6060);
 }
 bool tx_mappable(std::uint16_t i, std::uint8_t sub) {
+  if (i == 0x6000 || i == 0x6401) return sub >= 1;  // CiA 401 inputs (I/O module)
   return sub == 0 &&
          (i == 0x6041 || i == 0x6064 || i == 0x606C || i == 0x6061 || i == 0x603F || i == 0x60FD);
 }
@@ -40,6 +42,10 @@ void SimDrive::build_od() {
   auto rw = [&](std::uint16_t i, std::uint8_t s, std::int64_t v, std::size_t n) {
     od_[key(i, s)] = Entry{le(v, n), true, true};
   };
+  if (s_.io.enabled) {
+    build_io_od();
+    return;
+  }
   ro(0x1000, 0, 0x00020192, 4);  // CiA 402, servo drive
   ro(0x1001, 0, 0, 1);
   const std::string name = "contour-machine-sim " + s_.name;
@@ -116,6 +122,107 @@ void SimDrive::build_od() {
     }
   }
   od_defaults_ = od_;
+}
+
+// The communication objects of build_od() and the CiA 401 I/O objects (SimIoModule).
+void SimDrive::build_io_od() {
+  auto ro = [&](std::uint16_t i, std::uint8_t s, std::int64_t v, std::size_t n) {
+    od_[key(i, s)] = Entry{le(v, n), false, true};
+  };
+  auto rw = [&](std::uint16_t i, std::uint8_t s, std::int64_t v, std::size_t n) {
+    od_[key(i, s)] = Entry{le(v, n), true, true};
+  };
+  const SimIoModule& io = s_.io;
+  const auto count = [](int n) { return std::clamp(n, 0, 8); };
+  std::int64_t type = 401;
+  if (count(io.digital_inputs) > 0) type |= 0x10000;
+  if (count(io.digital_outputs) > 0) type |= 0x20000;
+  if (count(io.analog_inputs) > 0) type |= 0x40000;
+  if (count(io.analog_outputs) > 0) type |= 0x80000;
+  ro(0x1000, 0, type, 4);
+  ro(0x1001, 0, 0, 1);
+  const std::string name = "contour-machine-sim I/O " + std::to_string(s_.node_id);
+  od_[key(0x1008, 0)] = Entry{std::vector<std::uint8_t>(name.begin(), name.end()), false, true};
+  ro(0x1018, 0, 4, 1);
+  ro(0x1018, 1, s_.vendor_id, 4);
+  ro(0x1018, 2, 401, 4);
+  ro(0x1018, 3, s_.revision, 4);
+  ro(0x1018, 4, 0x1000 + s_.node_id, 4);
+  rw(0x1006, 0, 0, 4);
+  ro(0x1016, 0, 1, 1);
+  rw(0x1016, 1, 0, 4);
+  rw(0x1017, 0, 0, 2);
+  ro(0x1029, 0, 1, 1);
+  rw(0x1029, 1, 0, 1);
+  const auto pdos = static_cast<std::uint16_t>(std::clamp(s_.quirks.pdos, 1, 4));
+  const auto entries = static_cast<std::uint8_t>(std::clamp(s_.quirks.pdo_max_entries, 1, 8));
+  for (std::uint16_t k = 0; k < pdos; ++k) {
+    const auto n = s_.node_id;
+    ro(static_cast<std::uint16_t>(0x1400 + k), 0, 2, 1);
+    rw(static_cast<std::uint16_t>(0x1400 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobRpdo[k] + n, 4);
+    rw(static_cast<std::uint16_t>(0x1400 + k), 2, 0xFF, 1);
+    ro(static_cast<std::uint16_t>(0x1800 + k), 0, 2, 1);
+    rw(static_cast<std::uint16_t>(0x1800 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobTpdo[k] + n, 4);
+    rw(static_cast<std::uint16_t>(0x1800 + k), 2, 0xFF, 1);
+    rw(static_cast<std::uint16_t>(0x1600 + k), 0, 0, 1);
+    rw(static_cast<std::uint16_t>(0x1A00 + k), 0, 0, 1);
+    for (std::uint8_t e = 1; e <= entries; ++e) {
+      rw(static_cast<std::uint16_t>(0x1600 + k), e, 0, 4);
+      rw(static_cast<std::uint16_t>(0x1A00 + k), e, 0, 4);
+    }
+  }
+  auto objects = [&](std::uint16_t index, int n, std::size_t bytes, bool writable) {
+    if (n <= 0) return;
+    ro(index, 0, n, 1);
+    for (int k = 1; k <= n; ++k) {
+      od_[key(index, static_cast<std::uint8_t>(k))] = Entry{le(0, bytes), writable, true};
+    }
+  };
+  objects(0x6000, count(io.digital_inputs), 1, false);
+  objects(0x6200, count(io.digital_outputs), 1, true);
+  objects(0x6401, count(io.analog_inputs), 2, false);
+  objects(0x6411, count(io.analog_outputs), 2, true);
+  for (const auto& [sub, v] : io.fixed_inputs) set_int(0x6000, static_cast<std::uint8_t>(sub), v);
+  // Power-on mapping (CiA 401's own default, not the master's choice): RPDO1 {0x6200:01},
+  // TPDO1 {0x6000:01} when present; the master remaps.
+  if (count(io.digital_outputs) > 0) {
+    set_int(0x1600, 1, 0x62000108);
+    set_int(0x1600, 0, 1);
+  }
+  if (count(io.digital_inputs) > 0) {
+    set_int(0x1A00, 1, 0x60000108);
+    set_int(0x1A00, 0, 1);
+  }
+  for (const auto& m : s_.quirks.missing) {
+    for (auto it = od_.begin(); it != od_.end();) {
+      const bool hit = (it->first >> 8) == m.index &&
+                       (m.sub < 0 || static_cast<int>(it->first & 0xFF) == m.sub);
+      it = hit ? od_.erase(it) : std::next(it);
+    }
+  }
+  od_defaults_ = od_;
+}
+
+std::vector<std::int64_t> SimDrive::io_values(std::uint16_t index) const {
+  std::vector<std::int64_t> v;
+  for (int k = 1; k <= 8; ++k) {
+    if (od_.count(key(index, static_cast<std::uint8_t>(k))) == 0) break;
+    const std::int64_t x = read_int(index, static_cast<std::uint8_t>(k));
+    v.push_back(index == 0x6000 || index == 0x6200 ? (x & 0xFF) : x);
+  }
+  return v;
+}
+
+void SimDrive::io_loopback() {
+  for (int k = 1; k <= 8; ++k) {
+    const auto sub = static_cast<std::uint8_t>(k);
+    bool fixed = false;
+    for (const auto& f : s_.io.fixed_inputs) fixed = fixed || f.first == k;
+    if (!fixed && od_.count(key(0x6000, sub)) != 0 && od_.count(key(0x6200, sub)) != 0)
+      set_int(0x6000, sub, read_int(0x6200, sub));
+    if (od_.count(key(0x6401, sub)) != 0 && od_.count(key(0x6411, sub)) != 0)
+      set_int(0x6401, sub, read_int(0x6411, sub));
+  }
 }
 
 SimDrive::Entry* SimDrive::find(std::uint16_t index, std::uint8_t sub) {
@@ -309,6 +416,7 @@ void SimDrive::on_rpdo(const CanFrame& f, std::uint16_t pdo) {
     else if (idx == 0x60FF || idx == 0x607A) rx_target_ = co::as_i32(v[k]);
     else if (idx == 0x6060) set_int(0x6060, 0, static_cast<std::int8_t>(v[k] & 0xFF));
     else if (idx == 0x60FE) rx_do_ = static_cast<std::uint32_t>(v[k] & 0xFFFFFFFF);
+    else if (s_.io.enabled && (idx == 0x6200 || idx == 0x6411)) set_int(idx, m.entries[k].sub, v[k]);
   }
   // RPDO1 carries the controlword: only it latches the drive's command.
   if (m.find(0x6040) >= 0) rx_latched_ = true;
@@ -342,7 +450,12 @@ void SimDrive::on_sync() {
     }
     if (hb_gap_left_ > 0) --hb_gap_left_;  // counted in SYNCs: the gap pauses when SYNC stops
   };
-  if (s_.quirks.tpdo_after_step) {
+  if (s_.io.enabled) {
+    // A CiA 401 module: outputs looped to the inputs, then the TPDOs of this SYNC.
+    if (nmt_ == co::NmtState::kOperational) io_loopback();
+    sample_and_transmit();
+    lockstep_heartbeat();
+  } else if (s_.quirks.tpdo_after_step) {
     apply_and_step();
     sample_and_transmit();
     lockstep_heartbeat();
@@ -654,6 +767,10 @@ bool SimDrive::pdo_mapping_ok(bool rx, std::uint8_t count, std::uint16_t map_ind
       return false;
     }
     const auto it = od_.find(key(e.index, e.sub));
+    if (it == od_.end()) {
+      code = 0x06020000;
+      return false;
+    }
     if (static_cast<std::size_t>(e.bits) != 8 * it->second.value.size()) {
       code = 0x06040043;
       return false;

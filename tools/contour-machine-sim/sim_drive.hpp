@@ -82,6 +82,20 @@ struct InputSwitch {
   bool on_above = true;
 };
 
+// A CiA 401 generic I/O module instead of a drive (contour-machine-sim --io-module): 0x1000
+// device type 401 (+ bits 16..19 for the kinds of I/O present), `digital_inputs` bytes of 0x6000,
+// `digital_outputs` of 0x6200, `analog_inputs` INTEGER16 of 0x6401, `analog_outputs` of 0x6411
+// (0..8 each), PDO-mappable as the master configures them; no CiA 402 objects, no plant. Each
+// SYNC (operational): the outputs are looped to the inputs (0x6000:k = 0x6200:k, 0x6401:k =
+// 0x6411:k for the sub-indices both have) unless `fixed_inputs` pins 0x6000:k, then the TPDOs
+// are sampled and sent (--drop-tpdo and the heartbeat faults act as on a drive). RPDO values are
+// stored at once (the next SYNC samples them).
+struct SimIoModule {
+  bool enabled = false;
+  int digital_inputs = 2, digital_outputs = 2, analog_inputs = 2, analog_outputs = 2;
+  std::vector<std::pair<int, int>> fixed_inputs;  // {sub-index of 0x6000, byte value}
+};
+
 struct SimDriveSetup {
   std::uint8_t node_id = 1;
   std::string name = "X";
@@ -97,6 +111,7 @@ struct SimDriveSetup {
   SimFaults faults;
   SimQuirks quirks;
   std::vector<InputSwitch> switches;  // 0x60FD, sampled with the TPDOs
+  SimIoModule io;                     // io.enabled: a CiA 401 module, not a drive
 };
 
 class SimDrive {
@@ -121,6 +136,9 @@ class SimDrive {
   [[nodiscard]] double velocity_mm_s() const { return plant_.velocity_mm_s(); }
   [[nodiscard]] double spindle_rpm() const { return spindle_rpm_; }
   [[nodiscard]] bool is_spindle() const { return s_.spindle; }
+  [[nodiscard]] bool is_io_module() const { return s_.io.enabled; }
+  // CiA 401 module: sub-indices 1..n of `index` (0x6000, 0x6200, 0x6401, 0x6411) as they are now.
+  [[nodiscard]] std::vector<std::int64_t> io_values(std::uint16_t index) const;
   [[nodiscard]] long syncs() const { return syncs_; }
   // 0x60FD as last sampled; 0x60FE:01 as last written (RPDO2 at SYNC, or SDO).
   [[nodiscard]] std::uint32_t digital_inputs() const { return u32(0x60FD, 0); }
@@ -150,6 +168,8 @@ class SimDrive {
     bool readable = true;
   };
   void build_od();
+  void build_io_od();
+  void io_loopback();
   void reset_communication();
   void on_sync();
   void sample_and_transmit();  // TPDO (and --malformed burst) of this SYNC
