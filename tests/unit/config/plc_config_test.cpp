@@ -218,6 +218,39 @@ TEST(PlcConfig, BadKeysValuesAndBindings) {
   for (const auto& m : e) EXPECT_EQ(m.rfind("t.yaml:", 0), 0u) << m;
 }
 
+// CiA 401 bindings (CAN I/O modules, daemon/PLC.md "CAN I/O modules"): every wrong field is an
+// error naming the file, line and field.
+TEST(PlcConfig, Cia401FieldErrorsNameTheField) {
+  const std::string y = std::string(kMinimal) + R"(plc:
+  signals:
+    - {name: a, cia401: {node: 0, digital_input: 1, bit: 0}}
+    - {name: b, cia401: {node: 5, digital_input: 1, digital_output: 2, bit: 0}}
+    - {name: c, cia401: {node: 5, digital_output: 1, bit: 8}}
+    - {name: d, cia401: {node: 5, digital_output: 1}}
+    - {name: e, type: INT, cia401: {node: 5, digital_input: 1, bit: 1}}
+    - {name: f, cia401: {node: 5, analog_input: 1}}
+    - {name: g, type: INT, cia401: {node: 5, analog_output: 1, scale: 2.0}}
+    - {name: h, direction: output, cia401: {node: 5, digital_input: 1, bit: 3}}
+    - {name: i, cia401: {node: 5, digital_input: 0, bit: 3}}
+    - {name: j, cia401: {node: 5, digital_output: 1, bit: 1, colour: red}}
+)";
+  const auto e = config_errors(y, "t.yaml");
+  auto expect = [&](const std::string& needle) {
+    EXPECT_TRUE(any_contains(e, needle)) << "missing: " << needle;
+  };
+  expect("plc.signals[0].cia401.node");
+  expect("plc.signals[1].cia401.node: give exactly one of digital_input, digital_output");
+  expect("plc.signals[2].cia401.bit");
+  expect("plc.signals[3].cia401.bit");
+  expect("plc.signals[4].cia401.node: a digital CiA 401 point is BOOL");
+  expect("plc.signals[5].cia401.node: an analog CiA 401 point is INT, REAL or LREAL");
+  expect("plc.signals[6].cia401.scale: only for REAL and LREAL signals");
+  expect("plc.signals[7].cia401.node: 0x6000/0x6401 are inputs (direction)");
+  expect("plc.signals[8].cia401.digital_input");
+  expect("plc.signals[9].cia401.colour: unknown key");
+  for (const auto& m : e) EXPECT_EQ(m.rfind("t.yaml:", 0), 0u) << m;
+}
+
 TEST(PlcConfig, StructuredTextErrorsComeOutOfTheSameLoad) {
   TempDir d;
   d.write("a.st",

@@ -166,20 +166,23 @@ TEST(PlcHandshake, AUserMcodeNoPlcProgramHandlesPassesAtOnce) {
   EXPECT_LE(m.longest_still, g4.longest_still + 2);  // an exact stop, no wait
 }
 
-// A signal bound to a drive's digital inputs (0x60FD) or a CiA 401 module would sit at its
-// default: no bus maps those objects yet. Start-up refuses it, naming the signal.
-TEST(PlcHandshake, Cia401BindingsAreRefusedUntilTheBusMapsThem) {
+// A signal bound to a CiA 401 module needs the CANopen bus (the master maps the module's PDOs):
+// the in-process sim bus has no such module and the signal would sit at its default. Start-up
+// refuses it on the sim bus, naming the signal and what to do.
+TEST(PlcHandshake, Cia401BindingsAreRefusedOnTheSimBus) {
   config::Config cfg = sim_plc();
   ASSERT_FALSE(cfg.plc.signals.empty());
+  ASSERT_EQ(cfg.bus.type, "sim");
   cfg.plc.signals[0].binding.kind = config::PlcBindingKind::kCia401;
   SimBus bus(test_rig::drives(cfg));
   try {
     ServoLoop loop(cfg, bus);
-    FAIL() << "accepted a cia401 binding";
+    FAIL() << "accepted a cia401 binding on the sim bus";
   } catch (const std::invalid_argument& e) {
     const std::string what = e.what();
     EXPECT_NE(what.find("'" + cfg.plc.signals[0].name + "'"), std::string::npos) << what;
-    EXPECT_NE(what.find("cia401"), std::string::npos) << what;
+    EXPECT_NE(what.find("cia401 (CAN I/O module) bindings need the CANopen bus"), std::string::npos)
+        << what;
   }
 }
 

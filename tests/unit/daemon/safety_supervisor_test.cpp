@@ -76,6 +76,39 @@ TEST(SafetySupervisor, MissedTpdoStreakFaultsAtTheConfiguredLength) {
   EXPECT_EQ(f.limit, limit);
 }
 
+// CiA 401 modules of the PLC (BusFeedback::io): missing TPDOs at the drives' streak, an EMCY or
+// an NMT change fault the machine; the report names the node (axis field, as for a heartbeat).
+TEST(SafetySupervisor, AnIoModuleFaultNamesItsNode) {
+  Sup s;
+  const int limit = s.cfg.safety.missed_tpdo_streak;
+  s.fb.bus.io_modules = 2;
+  s.fb.bus.io[0].node_id = 5;
+  s.fb.bus.io[1].node_id = 9;
+  s.fb.bus.io[1].missed_streak = static_cast<std::uint32_t>(limit - 1);
+  EXPECT_FALSE(s.sup.check_bus(s.fb, true));
+  s.fb.bus.io[1].missed_streak = static_cast<std::uint32_t>(limit);
+  FaultReport f = s.sup.check_bus(s.fb, true);
+  EXPECT_EQ(f.cause, FaultCause::kIoModule);
+  EXPECT_EQ(f.axis, 9);
+  EXPECT_EQ(f.detail, static_cast<std::uint8_t>(IoModuleFault::kTpdoMissed));
+  EXPECT_EQ(f.value, limit);
+  s.fb.bus.io[0].emcy_code = 0x5000;  // what a module said comes before what was inferred
+  f = s.sup.check_bus(s.fb, true);
+  EXPECT_EQ(f.axis, 5);
+  EXPECT_EQ(f.detail, static_cast<std::uint8_t>(IoModuleFault::kEmcy));
+  EXPECT_EQ(f.value, 0x5000);
+  s.fb.bus.axis[0].fault = true;  // a drive fault first
+  EXPECT_EQ(s.sup.check_bus(s.fb, true).cause, FaultCause::kDriveFault);
+  s.fb.bus.axis[0].fault = false;
+  s.fb.bus.io[0] = IoModuleFeedback{};
+  s.fb.bus.io[0].node_id = 5;
+  s.fb.bus.io[0].nmt_lost = true;
+  const ResetBlock b = s.sup.reset_block(s.fb, false);
+  EXPECT_EQ(b.cause, FaultCause::kIoModule);
+  EXPECT_EQ(b.node, 5);
+  EXPECT_NE(describe(b).find("node 5"), std::string::npos) << describe(b);
+}
+
 TEST(SafetySupervisor, FollowingErrorBandGrowsWithSpeedLikeLinuxCnc) {
   Sup s;
   const double mfe = s.lim.min_ferror_mm, fe = s.lim.ferror_mm;
