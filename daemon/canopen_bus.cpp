@@ -180,7 +180,8 @@ void CanopenBus::run_cycles_for_stop() noexcept {
       master_->set_digital_outputs(i, 0);  // the PLC's drive outputs off with the drives
     }
     for (int m = 0; m < io_count_; ++m)  // and the CiA 401 modules' outputs
-      master_->set_io_outputs(static_cast<std::size_t>(io_index_[static_cast<std::size_t>(m)]), {}, {});
+      master_->set_io_outputs(static_cast<std::size_t>(io_index_[static_cast<std::size_t>(m)]), {},
+                              {});
     master_->send_rpdos();
     if ((!powered && k > 2) || silent > 3) break;
     if (!lockstep_) {
@@ -350,7 +351,8 @@ void CanopenBus::write(const AxisCommands& cmd) noexcept {
   for (const IoModuleCommands& o : cmd.io) {
     if (o.node_id <= 0 || o.node_id > 127) continue;
     const int i = master_->index_of(static_cast<std::uint8_t>(o.node_id));
-    if (i < 0 || master_->setup(static_cast<std::size_t>(i)).kind != co::NodeKind::kIoModule) continue;
+    if (i < 0 || master_->setup(static_cast<std::size_t>(i)).kind != co::NodeKind::kIoModule)
+      continue;
     master_->set_io_outputs(static_cast<std::size_t>(i), o.digital, o.analog);
   }
   master_->send_rpdos();
@@ -504,7 +506,9 @@ std::string CanopenBus::describe() const {
   if (io_count_ > 0) {
     s += ", CiA 401 I/O modules on nodes";
     for (int k = 0; k < io_count_; ++k)
-      s += " " + std::to_string(mcfg_.nodes[static_cast<std::size_t>(io_index_[static_cast<std::size_t>(k)])].node_id);
+      s += " " + std::to_string(
+                     mcfg_.nodes[static_cast<std::size_t>(io_index_[static_cast<std::size_t>(k)])]
+                         .node_id);
   }
   if (lockstep_) s += ", lockstep (simulated drives)";
   return s;

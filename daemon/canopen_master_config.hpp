@@ -86,7 +86,8 @@ inline void add_io_modules(const config::Config& cfg, drivers::canopen::MasterCo
       s.node_id = static_cast<std::uint8_t>(b.node_id);
       s.name = "I/O module";
       s.heartbeat_ms = static_cast<std::uint16_t>(cfg.bus.drive_defaults.heartbeat_ms);
-      s.heartbeat_timeout_ms = static_cast<std::uint16_t>(cfg.bus.drive_defaults.heartbeat_timeout_ms);
+      s.heartbeat_timeout_ms =
+          static_cast<std::uint16_t>(cfg.bus.drive_defaults.heartbeat_timeout_ms);
       s.sync_every = static_cast<std::uint8_t>(cfg.bus.drive_defaults.sync_every);
       s.quirks.profile = "cia401";
       c.nodes.push_back(s);
@@ -94,10 +95,18 @@ inline void add_io_modules(const config::Config& cfg, drivers::canopen::MasterCo
     }
     const auto bit = static_cast<std::uint8_t>(1u << (b.address - 1));
     switch (b.object) {
-      case config::Cia401Object::kDigitalInput: n->io.digital_inputs |= bit; break;
-      case config::Cia401Object::kDigitalOutput: n->io.digital_outputs |= bit; break;
-      case config::Cia401Object::kAnalogInput: n->io.analog_inputs |= bit; break;
-      case config::Cia401Object::kAnalogOutput: n->io.analog_outputs |= bit; break;
+      case config::Cia401Object::kDigitalInput:
+        n->io.digital_inputs |= bit;
+        break;
+      case config::Cia401Object::kDigitalOutput:
+        n->io.digital_outputs |= bit;
+        break;
+      case config::Cia401Object::kAnalogInput:
+        n->io.analog_inputs |= bit;
+        break;
+      case config::Cia401Object::kAnalogOutput:
+        n->io.analog_outputs |= bit;
+        break;
     }
   }
 }

@@ -105,10 +105,10 @@ std::string describe(const RtEvent& e) {
       break;
     case EventKind::kFault:
       o << "FAULT " << to_string(e.cause);
-      // For a heartbeat loss the field carries the CANopen node-id, not an axis index.
+      // For a heartbeat loss or an I/O module the field carries the CANopen node-id, not an axis.
       if (e.axis >= 0)
         o << (e.cause == FaultCause::kHeartbeatLost || e.cause == FaultCause::kIoModule ? " node "
-                                                                                         : " axis ")
+                                                                                        : " axis ")
           << e.axis;
       if (e.cause == FaultCause::kFollowingError || e.cause == FaultCause::kContourError) {
         o << ": " << e.value << " mm > limit " << e.limit << " mm";

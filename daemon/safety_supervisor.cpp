@@ -97,7 +97,8 @@ std::string describe(const ResetBlock& b) {
       return "the drive of " + who + " is not NMT operational";
     case FaultCause::kSpindleFault: return "the spindle drive still reports a fault";
     case FaultCause::kBusError: return "the CAN bus is still in error (bus-off / error passive)";
-    case FaultCause::kIoModule: return "the CiA 401 I/O module " + who + " is not NMT operational";
+    case FaultCause::kIoModule:
+      return "the CiA 401 I/O module " + who + " is not NMT operational";
     case FaultCause::kEstopInput: return "the E-stop input is still asserted";
     case FaultCause::kPlcFault:
     case FaultCause::kPlcEstop:
@@ -167,7 +168,8 @@ FaultReport SafetySupervisor::check_bus(const Feedback& fb, bool servo) const no
   for (int k = 0; k < fb.bus.io_modules; ++k) {
     const IoModuleFeedback& m = fb.bus.io[static_cast<std::size_t>(k)];
     if (m.nmt_lost)
-      return {FaultCause::kIoModule, m.node_id, 0.0, 0.0, static_cast<std::uint8_t>(IoModuleFault::kNmt)};
+      return {FaultCause::kIoModule, m.node_id, 0.0, 0.0,
+              static_cast<std::uint8_t>(IoModuleFault::kNmt)};
     if (m.emcy_code != 0)
       return {FaultCause::kIoModule, m.node_id, static_cast<double>(m.emcy_code), 0.0,
               static_cast<std::uint8_t>(IoModuleFault::kEmcy)};

@@ -653,7 +653,8 @@ void ServoLoop::logic() noexcept {
     c.analog = fb_.bus.io[m].analog;
   }
   in.cia401 = std::span<const Cia401Inputs>(
-      cia401_in_.data(), static_cast<std::size_t>(std::clamp(fb_.bus.io_modules, 0, static_cast<int>(kMaxIoModules))));
+      cia401_in_.data(),
+      static_cast<std::size_t>(std::clamp(fb_.bus.io_modules, 0, static_cast<int>(kMaxIoModules))));
   plc_->scan(in, plc_out_);
   const PlcRequests& rq = plc_out_.requests;
   plc_req_ = rq;

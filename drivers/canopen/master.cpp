@@ -50,10 +50,12 @@ std::span<const std::uint16_t> optional_objects() noexcept { return kOptionalObj
 std::vector<CanFilter> master_rx_filters(const MasterConfig& cfg) {
   std::vector<CanFilter> f;
   for (const auto& n : cfg.nodes) {
-    for (std::uint32_t base : {kCobEmcy, kCobSdoTx, kCobHeartbeat}) f.push_back({base + n.node_id, 0x7FF});
+    for (std::uint32_t base : {kCobEmcy, kCobSdoTx, kCobHeartbeat})
+      f.push_back({base + n.node_id, 0x7FF});
     if (n.kind == NodeKind::kIoModule) {
       const std::size_t tpdos = io_module_pdos(n.io, false).size();
-      for (std::size_t k = 0; k < tpdos && k < 4; ++k) f.push_back({kCobTpdo[k] + n.node_id, 0x7FF});
+      for (std::size_t k = 0; k < tpdos && k < 4; ++k)
+        f.push_back({kCobTpdo[k] + n.node_id, 0x7FF});
       continue;
     }
     f.push_back({kCobTpdo[0] + n.node_id, 0x7FF});
@@ -432,7 +434,8 @@ void Master::configure_io_module(const NodeSetup& n) {
   if ((device_type & 0xFFFF) != 401)
     throw StartupError(who + ": 0x1000 device type " + hex(device_type, 8) +
                        " is not a CiA 401 I/O module (profile " +
-                       std::to_string(device_type & 0xFFFF) + "), needed by the PLC's cia401 bindings");
+                       std::to_string(device_type & 0xFFFF) +
+                       "), needed by the PLC's cia401 bindings");
   std::optional<std::vector<std::uint8_t>> name;
   if (!n.quirks.expedited_only) name = optional_upload(n, 0x1008, 0);
   log(who + ": CiA 401 I/O module \"" +
@@ -444,8 +447,9 @@ void Master::configure_io_module(const NodeSetup& n) {
     std::uint8_t b[4];
     put_u32(b, (static_cast<std::uint32_t>(cfg_.master_node_id) << 16) | t);
     if (!optional_download(n, 0x1016, 1, b))
-      log(who + ": WARNING: no heartbeat consumer: this module keeps its outputs when the "
-                "master dies");
+      log(who +
+          ": WARNING: no heartbeat consumer: this module keeps its outputs when the "
+          "master dies");
   }
   // Every object the PLC uses, read before it is mapped: a module without it is refused naming
   // the object, not by an abort on 0x1A00 that says neither which nor why.
@@ -459,7 +463,8 @@ void Master::configure_io_module(const NodeSetup& n) {
                          (e.index == 0x6000 || e.index == 0x6200 ? "digital " : "analog ") +
                          (output ? "output" : "input") +
                          ", needed by the PLC's cia401 bindings): the module does not provide it "
-                         "(SDO abort " + hex(ex.code(), 8) + " " + sdo_abort_text(ex.code()) + ")");
+                         "(SDO abort " +
+                         hex(ex.code(), 8) + " " + sdo_abort_text(ex.code()) + ")");
     }
   };
   for (std::size_t k = 0; k < p.ntx; ++k)
@@ -736,8 +741,10 @@ void Master::dispatch_io_tpdo(std::size_t i, std::uint16_t pdo, const CanFrame& 
   for (std::size_t k = 0; k < m.count; ++k) {
     const PdoEntry& e = m.entries[k];
     const std::size_t ch = static_cast<std::size_t>(e.sub) - 1;  // 1..8 (io_module_pdos)
-    if (e.index == 0x6000) r.io_digital_in[ch] = static_cast<std::uint8_t>(v[k] & 0xFF);
-    else r.io_analog_in[ch] = as_i16(v[k]);
+    if (e.index == 0x6000)
+      r.io_digital_in[ch] = static_cast<std::uint8_t>(v[k] & 0xFF);
+    else
+      r.io_analog_in[ch] = as_i16(v[k]);
   }
   r.io_tpdos_in = static_cast<std::uint8_t>(r.io_tpdos_in | (1u << pdo));
   if (static_cast<unsigned>(r.io_tpdos_in) == (1u << p.ntx) - 1u && !r.tpdo_fresh) {

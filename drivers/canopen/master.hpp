@@ -342,7 +342,8 @@ class Master {
   void disable_pdos(const NodeSetup& n, bool rx, std::uint16_t from);
   void check_digital_io(const NodeSetup& n);
   void configure_io_module(const NodeSetup& n);
-  void dispatch_io_tpdo(std::size_t i, std::uint16_t pdo, const CanFrame& f, bool in_cycle) noexcept;
+  void dispatch_io_tpdo(std::size_t i, std::uint16_t pdo, const CanFrame& f,
+                        bool in_cycle) noexcept;
   void send_io_rpdos(std::size_t i, bool& err) noexcept;
   // Optional object write/read: skipped when the quirks list it; a 0x06020000/0x06090011 abort
   // from the drive is logged and skipped. Returns whether the transfer happened.

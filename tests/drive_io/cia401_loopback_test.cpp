@@ -189,9 +189,9 @@ TEST(Cia401Loopback, InputsArriveEachCycleAndOutputsReachTheModule) {
   b.start();
   daemon::AxisCommands cmd;
   cmd.io[0].node_id = 5;
-  cmd.io[0].digital[0] = 0x04;   // 0x6200:01 bit 2
-  cmd.io[0].digital[1] = 0xFF;   // 0x6200:02: not mapped, never sent
-  cmd.io[0].analog[1] = -1234;   // 0x6411:02
+  cmd.io[0].digital[0] = 0x04;  // 0x6200:01 bit 2
+  cmd.io[0].digital[1] = 0xFF;  // 0x6200:02: not mapped, never sent
+  cmd.io[0].analog[1] = -1234;  // 0x6411:02
   daemon::BusFeedback fb;
   for (int k = 0; k < 5; ++k) fb = b.cycle(cmd);
   ASSERT_EQ(fb.io_modules, 1);
@@ -199,9 +199,9 @@ TEST(Cia401Loopback, InputsArriveEachCycleAndOutputsReachTheModule) {
   EXPECT_EQ(m.node_id, 5);
   EXPECT_TRUE(m.fresh);
   EXPECT_EQ(m.missed_streak, 0u);
-  EXPECT_EQ(m.digital[1], 0x10);   // pinned
-  EXPECT_EQ(m.digital[0], 0x04);   // looped back from 0x6200:01
-  EXPECT_EQ(m.analog[1], -1234);   // looped back from 0x6411:02
+  EXPECT_EQ(m.digital[1], 0x10);  // pinned
+  EXPECT_EQ(m.digital[0], 0x04);  // looped back from 0x6200:01
+  EXPECT_EQ(m.analog[1], -1234);  // looped back from 0x6411:02
   const auto& mod = *b.can.drives[1];
   EXPECT_EQ(mod.io_values(0x6200), (std::vector<std::int64_t>{0x04, 0x00}));
   EXPECT_EQ(mod.io_values(0x6411), (std::vector<std::int64_t>{0, -1234}));
@@ -230,9 +230,10 @@ TEST(Cia401Loopback, ADriveOnTheModulesNodeIdIsRefusedNamingTheProfile) {
     b.start();
     FAIL() << "a CiA 402 drive taken for a CiA 401 module";
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("node 5 (I/O module): 0x1000 device type 0x00020192 is not "
-                                         "a CiA 401 I/O module (profile 402)"),
-              std::string::npos)
+    EXPECT_NE(
+        std::string(e.what()).find("node 5 (I/O module): 0x1000 device type 0x00020192 is not "
+                                   "a CiA 401 I/O module (profile 402)"),
+        std::string::npos)
         << e.what();
   }
 }
@@ -246,10 +247,11 @@ TEST(Cia401Loopback, AModuleWithoutAnObjectThePlcUsesIsRefusedNamingIt) {
     b.start();
     FAIL() << "started without 0x6401:02";
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("node 5 (I/O module): 0x6401:02 (analog input, needed by "
-                                         "the PLC's cia401 bindings): the module does not provide it "
-                                         "(SDO abort 0x06090011"),
-              std::string::npos)
+    EXPECT_NE(
+        std::string(e.what()).find("node 5 (I/O module): 0x6401:02 (analog input, needed by "
+                                   "the PLC's cia401 bindings): the module does not provide it "
+                                   "(SDO abort 0x06090011"),
+        std::string::npos)
         << e.what();
   }
 }

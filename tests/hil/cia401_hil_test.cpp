@@ -1,7 +1,8 @@
 // HIL: a CiA 401 I/O module on the CAN bus, bound to the soft PLC (issue 20), with contourd
 // driving contour-machine-sim over vcan0 in lockstep. Both are child processes:
-//   contour-machine-sim --config config/hil.yaml --can vcan0 --io-module 5:2:1:1:1 --io-input 5:2:16
-//   contourd --config <tmp>/c.yaml = config/hil.yaml (load ceiling raised, see below) + a plc:
+//   contour-machine-sim --config config/hil.yaml --can vcan0 --io-module 5:2:1:1:1 --io-input
+//   5:2:16 contourd --config <tmp>/c.yaml = config/hil.yaml (load ceiling raised, see below) + a
+//   plc:
 //            section binding node 5's 0x6000:01/:02, 0x6200:01, 0x6401:01, 0x6411:01
 // The simulated module loops its outputs to its inputs (0x6000:01 = 0x6200:01, 0x6401:01 =
 // 0x6411:01) and has 0x6000:02 pinned to 0x10: a PLC output written by the program reaches the
@@ -46,10 +47,13 @@ class Files {
   explicit Files(const std::string& tag, int ceiling = 100)
       : dir(fs::temp_directory_path() / ("cia401_hil_" + tag + "_" + std::to_string(::getpid()))) {
     fs::create_directories(dir);
-    std::ofstream(dir / "io401.st") << "PROGRAM io401\n  clamp := TRUE;\n  valve_pos := 12.5;\nEND_PROGRAM\n";
+    std::ofstream(dir / "io401.st")
+        << "PROGRAM io401\n  clamp := TRUE;\n  valve_pos := 12.5;\nEND_PROGRAM\n";
     std::string hil = contour::test::slurp(kSrc + "/config/hil.yaml");
     EXPECT_EQ(hil.find("\nplc:"), std::string::npos) << "config/hil.yaml has a plc: section now";
-    EXPECT_EQ(replace_all(hil, "load_ceiling_percent: 80", "load_ceiling_percent: " + std::to_string(ceiling)), 1U);
+    EXPECT_EQ(replace_all(hil, "load_ceiling_percent: 80",
+                          "load_ceiling_percent: " + std::to_string(ceiling)),
+              1U);
     std::ofstream(dir / "c.yaml")
         << hil << "\nplc:\n  programs: [{file: " << (dir / "io401.st").string() << "}]\n"
         << "  signals:\n"
@@ -104,7 +108,8 @@ TEST(Cia401Hil, ProgramOutputsReachTheModuleAndItsInputsReachThePlc) {
     EXPECT_NE(d.log().find("exceeds the ceiling of 80.0 %"), std::string::npos) << d.log();
   }
   Files files("io");
-  contour::test::MachineSim sim({"--io-module", "5:2:1:1:1", "--io-input", "5:2:16"}, files.config());
+  contour::test::MachineSim sim({"--io-module", "5:2:1:1:1", "--io-input", "5:2:16"},
+                                files.config());
   ASSERT_TRUE(sim.ready()) << sim.poll_output();
   EXPECT_NE(sim.poll_output().find("5(io5)"), std::string::npos) << sim.poll_output();
   contour::test::DaemonProcess d("cia401", {files.config(), {}, 6000, 3000});
@@ -124,7 +129,8 @@ TEST(Cia401Hil, ProgramOutputsReachTheModuleAndItsInputsReachThePlc) {
   EXPECT_EQ(signal(io, "clamp_fb")["value"], true) << io.dump();
   EXPECT_EQ(signal(io, "valve_fb")["value"], 12.5) << io.dump();
   EXPECT_EQ(signal(io, "part_present")["value"], true) << io.dump();  // 0x6000:02 = 0x10: bit 4
-  EXPECT_EQ(signal(io, "part_present")["source"].get<std::string>().find("cia401 node 5 0x6000:02"), 0U)
+  EXPECT_EQ(signal(io, "part_present")["source"].get<std::string>().find("cia401 node 5 0x6000:02"),
+            0U)
       << io.dump();
   EXPECT_EQ(d.ok({{"cmd", "status"}})["state"], "READY");
 
@@ -144,7 +150,8 @@ TEST(Cia401Hil, AModuleThatStopsSendingItsTpdoFaultsTheMachineNamingTheNode) {
   Files files("drop");
   // From SYNC 3000 on (3 s of lockstep after NMT start) the module sends no TPDO; its heartbeat
   // goes on, so the cause is the missing inputs, not a lost node.
-  contour::test::MachineSim sim({"--io-module", "5:2:1:1:1", "--drop-tpdo", "5:3000"}, files.config());
+  contour::test::MachineSim sim({"--io-module", "5:2:1:1:1", "--drop-tpdo", "5:3000"},
+                                files.config());
   ASSERT_TRUE(sim.ready()) << sim.poll_output();
   contour::test::DaemonProcess d("cia401_drop", {files.config(), {}, 6000, 0});
   ASSERT_TRUE(d.connected()) << d.log();
@@ -159,7 +166,8 @@ TEST(Cia401Hil, AModuleThatStopsSendingItsTpdoFaultsTheMachineNamingTheNode) {
     if (log.find("node 5 (I/O module): 3 TPDOs missed in a row") != std::string::npos) break;
     std::this_thread::sleep_for(10ms);
   }
-  EXPECT_NE(log.find("FAULT I/O module fault node 5: 3 missed TPDOs in a row"), std::string::npos) << log;
+  EXPECT_NE(log.find("FAULT I/O module fault node 5: 3 missed TPDOs in a row"), std::string::npos)
+      << log;
   EXPECT_NE(log.find("node 5 (I/O module): 3 TPDOs missed in a row"), std::string::npos) << log;
 }
 

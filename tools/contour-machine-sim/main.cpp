@@ -272,12 +272,15 @@ int main(int argc, char** argv) {
   try {
     for (const auto& d : io_modules) {
       auto v = parse_tuple(d, 1, 5, "--io-module");
-      if (v[0] < 1 || v[0] > 127) throw CLI::ValidationError("--io-module", "node-id 1..127 in '" + d + "'");
+      if (v[0] < 1 || v[0] > 127)
+        throw CLI::ValidationError("--io-module", "node-id 1..127 in '" + d + "'");
       for (std::size_t k = 1; k < v.size(); ++k)
-        if (v[k] < 0 || v[k] > 8) throw CLI::ValidationError("--io-module", "counts 0..8 in '" + d + "'");
+        if (v[k] < 0 || v[k] > 8)
+          throw CLI::ValidationError("--io-module", "counts 0..8 in '" + d + "'");
       for (const auto& s : setups)
         if (s.node_id == v[0])
-          throw CLI::ValidationError("--io-module", "node-id " + std::to_string(v[0]) + " is already simulated");
+          throw CLI::ValidationError("--io-module",
+                                     "node-id " + std::to_string(v[0]) + " is already simulated");
       contour::sim::SimDriveSetup s;
       s.node_id = static_cast<std::uint8_t>(v[0]);
       s.name = "io" + std::to_string(v[0]);
@@ -355,7 +358,9 @@ int main(int argc, char** argv) {
       auto v = parse_tuple(d, 3, 3, "--io-input");
       auto& s = find(v[0]);
       if (!s.io.enabled || v[1] < 1 || v[1] > s.io.digital_inputs || v[2] < 0 || v[2] > 255)
-        throw CLI::ValidationError("--io-input", "NODE must be an --io-module, SUB 1..its DI bytes, VALUE 0..255: '" + d + "'");
+        throw CLI::ValidationError(
+            "--io-input",
+            "NODE must be an --io-module, SUB 1..its DI bytes, VALUE 0..255: '" + d + "'");
       s.io.fixed_inputs.emplace_back(static_cast<int>(v[1]), static_cast<int>(v[2]));
     }
     for (const auto& d : input_switch) {

@@ -159,10 +159,12 @@ void SimDrive::build_io_od() {
   for (std::uint16_t k = 0; k < pdos; ++k) {
     const auto n = s_.node_id;
     ro(static_cast<std::uint16_t>(0x1400 + k), 0, 2, 1);
-    rw(static_cast<std::uint16_t>(0x1400 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobRpdo[k] + n, 4);
+    rw(static_cast<std::uint16_t>(0x1400 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobRpdo[k] + n,
+       4);
     rw(static_cast<std::uint16_t>(0x1400 + k), 2, 0xFF, 1);
     ro(static_cast<std::uint16_t>(0x1800 + k), 0, 2, 1);
-    rw(static_cast<std::uint16_t>(0x1800 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobTpdo[k] + n, 4);
+    rw(static_cast<std::uint16_t>(0x1800 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobTpdo[k] + n,
+       4);
     rw(static_cast<std::uint16_t>(0x1800 + k), 2, 0xFF, 1);
     rw(static_cast<std::uint16_t>(0x1600 + k), 0, 0, 1);
     rw(static_cast<std::uint16_t>(0x1A00 + k), 0, 0, 1);
@@ -195,8 +197,8 @@ void SimDrive::build_io_od() {
   }
   for (const auto& m : s_.quirks.missing) {
     for (auto it = od_.begin(); it != od_.end();) {
-      const bool hit = (it->first >> 8) == m.index &&
-                       (m.sub < 0 || static_cast<int>(it->first & 0xFF) == m.sub);
+      const bool hit =
+          (it->first >> 8) == m.index && (m.sub < 0 || static_cast<int>(it->first & 0xFF) == m.sub);
       it = hit ? od_.erase(it) : std::next(it);
     }
   }
@@ -416,7 +418,8 @@ void SimDrive::on_rpdo(const CanFrame& f, std::uint16_t pdo) {
     else if (idx == 0x60FF || idx == 0x607A) rx_target_ = co::as_i32(v[k]);
     else if (idx == 0x6060) set_int(0x6060, 0, static_cast<std::int8_t>(v[k] & 0xFF));
     else if (idx == 0x60FE) rx_do_ = static_cast<std::uint32_t>(v[k] & 0xFFFFFFFF);
-    else if (s_.io.enabled && (idx == 0x6200 || idx == 0x6411)) set_int(idx, m.entries[k].sub, v[k]);
+    else if (s_.io.enabled && (idx == 0x6200 || idx == 0x6411))
+      set_int(idx, m.entries[k].sub, v[k]);
   }
   // RPDO1 carries the controlword: only it latches the drive's command.
   if (m.find(0x6040) >= 0) rx_latched_ = true;

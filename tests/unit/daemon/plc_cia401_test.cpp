@@ -67,15 +67,17 @@ config::Config cia401_config() {
                                        "  lamp := TRUE;\n"
                                        "END_PROGRAM\n";
   const std::string yaml = contour::test::sim_yaml(contour::test::SimPlc::kNone) +
-                           "\nplc:\n  programs: [{file: " + dir + "/cia401.st}]\n  signals:\n"
+                           "\nplc:\n  programs: [{file: " + dir +
+                           "/cia401.st}]\n  signals:\n"
                            "    - {name: part, cia401: {node: 5, digital_input: 2, bit: 4}}\n"
                            "    - {name: clamp, cia401: {node: 5, digital_output: 1, bit: 2}}\n"
                            "    - {name: flow, type: INT, cia401: {node: 5, analog_input: 1}}\n"
                            "    - {name: valve, type: INT, cia401: {node: 5, analog_output: 1}}\n"
                            "    - {name: lamp, cia401: {node: 9, digital_output: 3, bit: 7}}\n";
   config::Config c = config::load_config_string(yaml, dir + "/cia401.yaml");
-  // The in-process sim bus refuses cia401 bindings (PlcHandshake.Cia401BindingsAreRefusedOnTheSimBus);
-  // here the bus is the wrapper above, standing in for the CANopen bus.
+  // The in-process sim bus refuses cia401 bindings
+  // (PlcHandshake.Cia401BindingsAreRefusedOnTheSimBus); here the bus is the wrapper above, standing
+  // in for the CANopen bus.
   c.bus.type = "socketcan";
   return c;
 }

@@ -148,8 +148,8 @@ TEST(CanopenIoModule, ReceiveFiltersTakeTheModulesTpdos) {
     return false;
   };
   EXPECT_TRUE(has(0x185));
-  EXPECT_TRUE(has(0x085));  // EMCY
-  EXPECT_TRUE(has(0x705));  // heartbeat
+  EXPECT_TRUE(has(0x085));   // EMCY
+  EXPECT_TRUE(has(0x705));   // heartbeat
   EXPECT_FALSE(has(0x285));  // the module maps one TPDO
 }
 
