@@ -635,14 +635,7 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
     const auto i = static_cast<std::size_t>(index_of(n));
     const auto& m = cfg_.nodes[i].tpdo;
     PdoValues v{};
-    if (f.dlc != m.bytes() || !unpack_pdo(m, f, v)) {
-      ++counters_.malformed_frames;
-      return;
-    }
-    if (!in_cycle) {
-      ++counters_.late_or_stray_frames;
-      return;
-    }
+    if (!take_pdo(m, f, in_cycle, v)) return;
     auto& r = rt_[i];
     r.statusword = static_cast<std::uint16_t>(v[static_cast<std::size_t>(m.find(0x6041))]);
     const Cia402State s = decode_statusword(r.statusword);
@@ -720,6 +713,18 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
   ++counters_.unknown_frames;
 }
 
+bool Master::take_pdo(const PdoMapping& m, const CanFrame& f, bool in_cycle, PdoValues& v) noexcept {
+  if (f.dlc != m.bytes() || !unpack_pdo(m, f, v)) {
+    ++counters_.malformed_frames;
+    return false;
+  }
+  if (!in_cycle) {
+    ++counters_.late_or_stray_frames;
+    return false;
+  }
+  return true;
+}
+
 void Master::dispatch_io_tpdo(std::size_t i, std::uint16_t pdo, const CanFrame& f,
                               bool in_cycle) noexcept {
   const IoPdos& p = io_pdos_[i];
@@ -729,14 +734,7 @@ void Master::dispatch_io_tpdo(std::size_t i, std::uint16_t pdo, const CanFrame& 
   }
   const PdoMapping& m = p.tx[pdo];
   PdoValues v{};
-  if (f.dlc != m.bytes() || !unpack_pdo(m, f, v)) {
-    ++counters_.malformed_frames;
-    return;
-  }
-  if (!in_cycle) {
-    ++counters_.late_or_stray_frames;
-    return;
-  }
+  if (!take_pdo(m, f, in_cycle, v)) return;
   NodeRuntime& r = rt_[i];
   for (std::size_t k = 0; k < m.count; ++k) {
     const PdoEntry& e = m.entries[k];

@@ -342,6 +342,9 @@ class Master {
   void disable_pdos(const NodeSetup& n, bool rx, std::uint16_t from);
   void check_digital_io(const NodeSetup& n);
   void configure_io_module(const NodeSetup& n);
+  // A TPDO's values if its length and mapping fit and it came inside the cycle; otherwise false,
+  // counted as malformed or late.
+  bool take_pdo(const PdoMapping& m, const CanFrame& f, bool in_cycle, PdoValues& v) noexcept;
   void dispatch_io_tpdo(std::size_t i, std::uint16_t pdo, const CanFrame& f,
                         bool in_cycle) noexcept;
   void send_io_rpdos(std::size_t i, bool& err) noexcept;

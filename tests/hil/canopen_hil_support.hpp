@@ -15,8 +15,10 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -28,6 +30,21 @@
 #include "daemon/canopen_master_config.hpp"
 
 namespace contour::test {
+
+// The plant position of `node` in contour-machine-sim's JSON summary (the last line it prints
+// at exit: nodes[].position_mm); NaN if there is none.
+inline double sim_summary_position_mm(const std::string& out, int node) {
+  const auto end = out.find_last_not_of('\n');
+  if (end == std::string::npos) return std::nan("");
+  const auto begin = out.find_last_of('\n', end);
+  const auto j = nlohmann::json::parse(out.substr(begin == std::string::npos ? 0 : begin + 1, end - begin),
+                                       nullptr, false);
+  if (!j.is_object() || !j.contains("nodes")) return std::nan("");
+  for (const auto& n : j["nodes"]) {
+    if (n["node_id"] == node) return n["position_mm"].get<double>();
+  }
+  return std::nan("");
+}
 
 inline const char* kIface = "vcan0";
 

@@ -51,16 +51,6 @@ std::string hil_drive_homing_config(const std::string& tag) {
   return path.string();
 }
 
-// The last line of contour-machine-sim's output: its JSON summary (nodes[].position_mm: the plant).
-double sim_position_mm(const std::string& out, int node) {
-  const auto end = out.find_last_not_of('\n');
-  const auto begin = out.find_last_of('\n', end);
-  const json j = json::parse(out.substr(begin == std::string::npos ? 0 : begin + 1, end - begin));
-  for (const auto& n : j["nodes"]) {
-    if (n["node_id"] == node) return n["position_mm"].get<double>();
-  }
-  return std::nan("");
-}
 
 }  // namespace
 
@@ -111,7 +101,7 @@ TEST(DriveHomingHil, ModeSixOverVcanLandsOnTheTruePositionWithoutFault) {
     EXPECT_NE(d.log().find("axis 0 homed"), std::string::npos) << d.log();
   }  // the daemon disables the drives and exits; the plant stays where it is
   const std::string out = sim.stop();
-  const double true_x = sim_position_mm(out, 1);
+  const double true_x = contour::test::sim_summary_position_mm(out, 1);
   std::printf("[figure] machine X %.6f mm, plant X %.6f mm: %.3f um apart\n", act_x, true_x,
               (act_x - true_x) * 1e3);
   // The drive samples its switch each SYNC at 1 mm/s (1 um), the encoder count is 0.5 um.
@@ -139,6 +129,6 @@ TEST(DriveHomingHil, ADriveWithoutHomingFailsAtOnceNamingNodeAndObject) {
     EXPECT_NE(d.log().find("HOMING FAILED axis 0"), std::string::npos) << d.log();
   }
   const std::string out = sim.stop();
-  EXPECT_NEAR(sim_position_mm(out, 1), 0.0, 0.001) << out;  // never moved
+  EXPECT_NEAR(contour::test::sim_summary_position_mm(out, 1), 0.0, 0.001) << out;  // never moved
   std::filesystem::remove(cfg);
 }

@@ -50,17 +50,6 @@ std::string hil_homing_config(const std::string& tag, const std::string& home) {
   return path.string();
 }
 
-// The last line of contour-machine-sim's output: its JSON summary (nodes[].position_mm: the plant).
-double sim_position_mm(const std::string& out, int node) {
-  const auto end = out.find_last_not_of('\n');
-  const auto begin = out.find_last_of('\n', end);
-  const json j = json::parse(out.substr(begin == std::string::npos ? 0 : begin + 1, end - begin), nullptr, false);
-  if (!j.is_object()) return std::nan("");
-  for (const auto& n : j["nodes"]) {
-    if (n["node_id"] == node) return n["position_mm"].get<double>();
-  }
-  return std::nan("");
-}
 
 // X at rest at `target_mm`: two samples at least 300 cycles apart, 1 um from each other and 2 um
 // from the target (the final move is a trapezoid that rings some 25 um past its end and settles
@@ -106,7 +95,7 @@ TEST(HomingHil, SwitchOverVcanLatchesTheReleaseEdgeOnTheTruePosition) {
     EXPECT_NE(d.log().find("axis 0 homed"), std::string::npos) << d.log();
   }  // the daemon disables the drives and exits; the plant stays where it is
   const std::string out = sim.stop();
-  const double true_x = sim_position_mm(out, 1);
+  const double true_x = contour::test::sim_summary_position_mm(out, 1);
   std::printf("[figure] switch homing over vcan: machine X %.6f mm, plant X %.6f mm: %.3f um apart\n", act_x,
               true_x, (act_x - true_x) * 1e3);
   EXPECT_NEAR(act_x, true_x, 0.003) << out;
@@ -136,6 +125,6 @@ TEST(HomingHil, AbsoluteOverVcanIsHomedFromTheStartAtTheEncoderPlusTheOffset) {
     EXPECT_EQ(d.log().find("FAULT"), std::string::npos) << d.log();
   }
   const std::string out = sim.stop();
-  EXPECT_NEAR(sim_position_mm(out, 1), 0.0, 0.001) << out;  // never moved
+  EXPECT_NEAR(contour::test::sim_summary_position_mm(out, 1), 0.0, 0.001) << out;  // never moved
   std::filesystem::remove(cfg);
 }
