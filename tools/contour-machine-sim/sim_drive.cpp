@@ -60,23 +60,7 @@ void SimDrive::build_od() {
   ro(0x1016, 0, 1, 1);
   rw(0x1016, 1, 0, 4);
   rw(0x1017, 0, 0, 2);
-  const auto pdos = static_cast<std::uint16_t>(std::clamp(s_.quirks.pdos, 1, 4));
-  const auto entries = static_cast<std::uint8_t>(std::clamp(s_.quirks.pdo_max_entries, 1, 8));
-  for (std::uint16_t k = 0; k < pdos; ++k) {
-    const auto n = s_.node_id;
-    ro(static_cast<std::uint16_t>(0x1400 + k), 0, 2, 1);
-    rw(static_cast<std::uint16_t>(0x1400 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobRpdo[k] + n, 4);
-    rw(static_cast<std::uint16_t>(0x1400 + k), 2, 0xFF, 1);
-    ro(static_cast<std::uint16_t>(0x1800 + k), 0, 2, 1);
-    rw(static_cast<std::uint16_t>(0x1800 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobTpdo[k] + n, 4);
-    rw(static_cast<std::uint16_t>(0x1800 + k), 2, 0xFF, 1);
-    rw(static_cast<std::uint16_t>(0x1600 + k), 0, 0, 1);
-    rw(static_cast<std::uint16_t>(0x1A00 + k), 0, 0, 1);
-    for (std::uint8_t e = 1; e <= entries; ++e) {
-      rw(static_cast<std::uint16_t>(0x1600 + k), e, 0, 4);
-      rw(static_cast<std::uint16_t>(0x1A00 + k), e, 0, 4);
-    }
-  }
+  build_pdo_objects();
   // Power-on mapping (a drive's own default, deliberately not the master's choice): RPDO1
   // {controlword}, TPDO1 {statusword}; the master must remap.
   set_int(0x1600, 1, 0x60400010);
@@ -124,6 +108,35 @@ void SimDrive::build_od() {
   od_defaults_ = od_;
 }
 
+// PDO communication (0x1400/0x1800) and mapping (0x1600/0x1A00) objects, quirks.pdos of each
+// with quirks.pdo_max_entries entries: PDO 1 valid, the others invalid until the master maps them.
+// Shared by the drive's and the I/O module's dictionary.
+void SimDrive::build_pdo_objects() {
+  auto ro = [&](std::uint16_t i, std::uint8_t s, std::int64_t v, std::size_t n) {
+    od_[key(i, s)] = Entry{le(v, n), false, true};
+  };
+  auto rw = [&](std::uint16_t i, std::uint8_t s, std::int64_t v, std::size_t n) {
+    od_[key(i, s)] = Entry{le(v, n), true, true};
+  };
+  const auto pdos = static_cast<std::uint16_t>(std::clamp(s_.quirks.pdos, 1, 4));
+  const auto entries = static_cast<std::uint8_t>(std::clamp(s_.quirks.pdo_max_entries, 1, 8));
+  for (std::uint16_t k = 0; k < pdos; ++k) {
+    const auto n = s_.node_id;
+    ro(static_cast<std::uint16_t>(0x1400 + k), 0, 2, 1);
+    rw(static_cast<std::uint16_t>(0x1400 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobRpdo[k] + n, 4);
+    rw(static_cast<std::uint16_t>(0x1400 + k), 2, 0xFF, 1);
+    ro(static_cast<std::uint16_t>(0x1800 + k), 0, 2, 1);
+    rw(static_cast<std::uint16_t>(0x1800 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobTpdo[k] + n, 4);
+    rw(static_cast<std::uint16_t>(0x1800 + k), 2, 0xFF, 1);
+    rw(static_cast<std::uint16_t>(0x1600 + k), 0, 0, 1);
+    rw(static_cast<std::uint16_t>(0x1A00 + k), 0, 0, 1);
+    for (std::uint8_t e = 1; e <= entries; ++e) {
+      rw(static_cast<std::uint16_t>(0x1600 + k), e, 0, 4);
+      rw(static_cast<std::uint16_t>(0x1A00 + k), e, 0, 4);
+    }
+  }
+}
+
 // The communication objects of build_od() and the CiA 401 I/O objects (SimIoModule).
 void SimDrive::build_io_od() {
   auto ro = [&](std::uint16_t i, std::uint8_t s, std::int64_t v, std::size_t n) {
@@ -154,25 +167,7 @@ void SimDrive::build_io_od() {
   rw(0x1017, 0, 0, 2);
   ro(0x1029, 0, 1, 1);
   rw(0x1029, 1, 0, 1);
-  const auto pdos = static_cast<std::uint16_t>(std::clamp(s_.quirks.pdos, 1, 4));
-  const auto entries = static_cast<std::uint8_t>(std::clamp(s_.quirks.pdo_max_entries, 1, 8));
-  for (std::uint16_t k = 0; k < pdos; ++k) {
-    const auto n = s_.node_id;
-    ro(static_cast<std::uint16_t>(0x1400 + k), 0, 2, 1);
-    rw(static_cast<std::uint16_t>(0x1400 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobRpdo[k] + n,
-       4);
-    rw(static_cast<std::uint16_t>(0x1400 + k), 2, 0xFF, 1);
-    ro(static_cast<std::uint16_t>(0x1800 + k), 0, 2, 1);
-    rw(static_cast<std::uint16_t>(0x1800 + k), 1, (k == 0 ? 0 : 0x80000000LL) + co::kCobTpdo[k] + n,
-       4);
-    rw(static_cast<std::uint16_t>(0x1800 + k), 2, 0xFF, 1);
-    rw(static_cast<std::uint16_t>(0x1600 + k), 0, 0, 1);
-    rw(static_cast<std::uint16_t>(0x1A00 + k), 0, 0, 1);
-    for (std::uint8_t e = 1; e <= entries; ++e) {
-      rw(static_cast<std::uint16_t>(0x1600 + k), e, 0, 4);
-      rw(static_cast<std::uint16_t>(0x1A00 + k), e, 0, 4);
-    }
-  }
+  build_pdo_objects();
   auto objects = [&](std::uint16_t index, int n, std::size_t bytes, bool writable) {
     if (n <= 0) return;
     ro(index, 0, n, 1);

@@ -169,6 +169,7 @@ class SimDrive {
   };
   void build_od();
   void build_io_od();
+  void build_pdo_objects();
   void io_loopback();
   void reset_communication();
   void on_sync();
