@@ -9,6 +9,7 @@
 #include <fstream>
 
 #include "tests/hil/canopen_hil_support.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace {
 
@@ -55,7 +56,7 @@ std::string quirky_config() {
            "    - {node_id: 1, profile: one-pdo-expedited}\n"
            "    - {node_id: 2, profile: after-step}\n"
            "    - {node_id: 3, profile: no-quick-stop-objects}\n");
-  const std::string path = ::testing::TempDir() + "/hil_quirks.yaml";
+  const std::string path = contour::test::process_temp_dir() + "/hil_quirks.yaml";
   std::ofstream(path) << y;
   return path;
 }

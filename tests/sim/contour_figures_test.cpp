@@ -17,6 +17,7 @@
 #include <string>
 
 #include "tests/support/sim_config.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace {
 
@@ -88,7 +89,7 @@ TEST(ContourFigures, Eq11CoupledVsUncoupled) {
   EXPECT_GE(j["ratio_p_ccc"].get<double>(), 23.0);
   EXPECT_GE(j["ratio_pid_ccc"].get<double>(), 20.0);
   // Detuned: coupling gains / 10 miss the bar.
-  const std::string cfg = ::testing::TempDir() + "weak_ccc.yaml";
+  const std::string cfg = contour::test::process_temp_dir() + "weak_ccc.yaml";
   {
     FILE* f = std::fopen(cfg.c_str(), "w");
     ASSERT_NE(f, nullptr);
@@ -147,7 +148,7 @@ TEST(ContourFigures, OneCycleTransportDelay) {
 }
 
 TEST(ContourFigures, CsvAndPlot) {
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = contour::test::process_temp_dir();
   const std::string csv = dir + "eq11_ccc.csv";
   const std::string png = dir + "eq11_compare.png";
   std::filesystem::remove(csv);
@@ -268,7 +269,7 @@ std::string sim_yaml_with(const std::string& derivative) {
     text += line + "\n";
     if (line.rfind("  delay_compensation:", 0) == 0) text += "  derivative: " + derivative + "\n";
   }
-  const std::string path = ::testing::TempDir() + "sim_derivative.yaml";
+  const std::string path = contour::test::process_temp_dir() + "sim_derivative.yaml";
   std::FILE* o = std::fopen(path.c_str(), "w");
   if (o != nullptr) {
     std::fputs(text.c_str(), o);
@@ -285,7 +286,7 @@ std::string sim_yaml_with(const std::string& derivative) {
 // the interpolator's 5 ms jerk stage (interpolator.fir2_ms) 1.28 / 1.61 / 1.04 (control/CHATTER.md). `contour-sim contour --reference-csv ... --daemon-clamps` replays
 // that run's reference through the same control stage and gives the same figure.
 TEST(ContourFigures, DaemonTable2CommandChatter) {
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = contour::test::process_temp_dir();
   const std::string csv = dir + "t2_default.csv", csv_off = dir + "t2_off.csv";
   const std::string cmd = "cd " CONTOUR_SOURCE_DIR " && " + sim_binary() +
                           " run --program config/programs/table2.ngc --config ";

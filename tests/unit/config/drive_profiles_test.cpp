@@ -7,6 +7,7 @@
 
 #include "config/config.hpp"
 #include "config/drive_profiles.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace cfg = contour::config;
 
@@ -78,7 +79,7 @@ TEST(DriveProfiles, InlineProfilePerDriveAndPerNode) {
 }
 
 TEST(DriveProfiles, ProfileFilesAreRelativeToTheConfigFile) {
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = contour::test::process_temp_dir();
   {
     std::ofstream f(dir + "/acme.yaml");
     f << "acme:\n  rpdos: 1\n  tpdos: 1\n";

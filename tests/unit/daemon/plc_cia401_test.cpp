@@ -13,6 +13,7 @@
 #include "loop_rig.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/support/sim_config.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace contour::daemon {
 namespace {
@@ -60,7 +61,7 @@ class ModuleBus final : public AxisBus {
 };
 
 config::Config cia401_config() {
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = contour::test::process_temp_dir();
   std::ofstream(dir + "/cia401.st") << "PROGRAM io\n"
                                        "  clamp := part;\n"
                                        "  valve := flow + 1;\n"

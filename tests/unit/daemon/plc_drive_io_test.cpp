@@ -19,6 +19,7 @@
 #include "loop_rig.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/support/sim_config.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace contour::daemon {
 namespace {
@@ -115,7 +116,7 @@ TEST(SimBusDriveIo, DefaultSwitchesSitAtTheSoftLimits) {
 // config/sim.yaml plus a PLC program on X's drive I/O: a cam (0x60FD bit 16) holds the program,
 // the positive limit (bit 1) faults the axis and lights a lamp on 0x60FE:01 bit 16.
 config::Config drive_io_config() {
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = contour::test::process_temp_dir();
   std::ofstream(dir + "/drive_io.st") << "PROGRAM limits\n"
                                          "  NC.axis_fault_x := x_plus;\n"
                                          "  NC.feed_hold_req := x_cam;\n"

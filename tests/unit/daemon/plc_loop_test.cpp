@@ -14,6 +14,7 @@
 #include "loop_rig.hpp"
 #include "tests/support/alloc_counter.hpp"
 #include "tests/support/sim_config.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace contour::daemon {
 namespace {
@@ -48,7 +49,7 @@ TEST(PlcLoop, SimYamlShipsTheExampleMachineLogic) {
   EXPECT_EQ(cfg.plc.programs.size(), 5u);
   EXPECT_TRUE(cfg.plc.tool_change);
   EXPECT_EQ(cfg.plc.mcodes.size(), 3u);
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = contour::test::process_temp_dir();
   const config::Config manual = config::load_config_file(
       contour::test::write_sim_yaml(dir + "/sim_manual.yaml", contour::test::SimPlc::kManualToolChange));
   EXPECT_TRUE(manual.plc.present);
@@ -169,7 +170,7 @@ TEST(PlcLoop, OvertravelFaultsTheAxisResetOnlyOnceReleased) {
 // A PLC E-stop request: ESTOP at once, reset refused while it is requested.
 TEST(PlcLoop, EstopRequestAndItsReset) {
   config::Config cfg = test_rig::sim_config();
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = contour::test::process_temp_dir();
   {
     std::ofstream(dir + "/estop.st") << "PROGRAM e\n  NC.estop_req := stop_button;\nEND_PROGRAM\n";
   }
@@ -205,7 +206,7 @@ TEST(PlcLoop, EstopRequestAndItsReset) {
 // fault: the status names no axis (the engine fault's index, the program's, is in plc_cause) and
 // the fault event carries the engine fault's kind for the log. It used to report "axis 1".
 TEST(PlcLoop, EngineFaultIsNotAnAxisFault) {
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = contour::test::process_temp_dir();
   std::ofstream(dir + "/a.st") << "PROGRAM a\n  lamp := TRUE;\nEND_PROGRAM\n";
   std::ofstream(dir + "/b.st") << "PROGRAM b\nVAR x : INT; END_VAR\n  x := 10 / d;\nEND_PROGRAM\n";
   const std::string yaml = contour::test::sim_yaml(contour::test::SimPlc::kNone) + "\nplc:\n  programs: [{file: " + dir +
