@@ -358,6 +358,7 @@ class Master {
                                     bool upload, std::span<const std::uint8_t> data);
   std::string node_label(std::uint8_t node_id) const;
   void wait_boot_ups();
+  void wait_operational();
   void log(const std::string& s) const {
     if (log_) log_(s);
   }
