@@ -944,7 +944,29 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
       if (io_ && !io_->reset_estop()) {
         throw CommandError("reset refused: the E-stop input is still asserted (release it first)");
       }
-      const MachineState now = post_and_wait({CommandKind::kReset}, st.state, 1.0);
+      // The loop decides: at once, or when the causes clear within its reset window (250
+      // cycles), or refused when the window closes. The answer is that verdict, not a wall-clock
+      // guess: a reply "refused" for a reset that completes later would lie to the operator.
+      const std::uint64_t verdicts0 = st.reset_verdicts;
+      if (!loop_->post({CommandKind::kReset})) throw CommandError("command queue full; retry");
+      const auto cap = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+      bool decided = false;
+      while (std::chrono::steady_clock::now() < cap) {
+        if (loop_->status().reset_verdicts != verdicts0) {
+          decided = true;
+          break;
+        }
+        if (safety_request_waiting()) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      if (!decided) {
+        throw CommandError(std::string("reset pending: ") +
+                           (safety_request_waiting() ? "answered early for a waiting stop/E-stop request"
+                                                     : "the loop has not decided within 30 s") +
+                           "; the machine resets by itself if its causes clear within the loop's "
+                           "250-cycle window, watch the status");
+      }
+      const MachineState now = loop_->status().state;
       if (now == S::kFault || now == S::kEstop) {
         // The loop's reset rule names what is still missing (SafetySupervisor::reset_block).
         const ResetBlock b = loop_->status().reset_block;

@@ -445,9 +445,12 @@ void ServoLoop::apply_command(const LoopCommand& c) noexcept {
       // The E-stop input latch is cleared by the non-RT side (IoChannels::reset_estop) first.
       if (st != MachineState::kFault && st != MachineState::kEstop) {
         refuse();
+        ++reset_verdicts_;
         break;
       }
-      if (!try_reset()) {
+      if (try_reset()) {
+        ++reset_verdicts_;
+      } else {
         // Drives in Fault leave it only on the CiA 402 fault-reset edge, and the master's latched
         // heartbeat/bus faults only when acknowledged: ask the bus, then give the causes up to
         // kResetWindowCycles to clear (the reset completes in the cycle they do, else refused).
@@ -806,10 +809,13 @@ void ServoLoop::run_commands() noexcept {
     const MachineState st = sm_.state();
     if (st != MachineState::kFault && st != MachineState::kEstop) {
       reset_pending_cycles_ = 0;
+      ++reset_verdicts_;
     } else if (try_reset()) {
       reset_pending_cycles_ = 0;
+      ++reset_verdicts_;
     } else if (reset_pending_cycles_ == 0) {
       refuse_command(CommandKind::kReset);  // the causes did not clear within the window
+      ++reset_verdicts_;
     }
   }
   LoopCommand c;
@@ -1350,6 +1356,8 @@ void ServoLoop::publish() noexcept {
   pub_.estop_input = fb_.estop_input;
   pub_.stop_phase = stop_.phase();
   pub_.reset_block = reset_block_;
+  pub_.reset_verdicts = reset_verdicts_;
+  pub_.reset_pending = reset_pending_cycles_ > 0;
   pub_.soft_min_mm = limits_.min_mm;
   pub_.soft_max_mm = limits_.max_mm;
   pub_.plc_present = plc_ != nullptr;

@@ -261,6 +261,11 @@ struct LoopStatus {
   // Stops (issue 16).
   StopSource::Phase stop_phase = StopSource::Phase::kOff;  // the controlled stop / power-down
   ResetBlock reset_block{};         // why the last reset was refused (kNone: not refused)
+  // `reset` verdicts: counted each time a reset command is decided (done, or refused at once or
+  // when its kResetWindowCycles window closes). The command handler waits for the count to move,
+  // so its answer is the loop's verdict, however slowly the cycles run.
+  std::uint64_t reset_verdicts = 0;
+  bool reset_pending = false;       // a reset waits for its causes to clear (window open)
   std::array<double, 3> soft_min_mm{};  // live soft limits (machine coordinates)
   std::array<double, 3> soft_max_mm{};
   // Soft PLC (issue 20; attach_plc): its requests this cycle and the last PLC cause of a stop.
@@ -444,6 +449,7 @@ class ServoLoop {
   float lateness_us_ = 0.0F;  // set by run() before each cycle
   static constexpr int kResetWindowCycles = 250;  // a pending `reset` waits this long for causes
   int reset_pending_cycles_ = 0;
+  std::uint64_t reset_verdicts_ = 0;
   Feedback fb_{};
   AxisCommands out_{};
   Eigen::Vector3d ref_ = Eigen::Vector3d::Zero();

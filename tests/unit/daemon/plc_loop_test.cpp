@@ -167,6 +167,55 @@ TEST(PlcLoop, OvertravelFaultsTheAxisResetOnlyOnceReleased) {
   EXPECT_EQ(r.loop.status().state, MachineState::kReady);
 }
 
+// A reset whose cause is still there stays pending for the loop's window (250 cycles) and is
+// decided in the cycle the cause goes, or refused when the window closes. The loop publishes
+// each verdict (reset_verdicts): the `reset` command's reply waits for it, so a reply never says
+// "refused" for a reset that completes later (the 1 s wall-clock wait did, on a slow loop).
+TEST(PlcLoop, AResetIsDecidedByTheLoopAndTheVerdictIsPublished) {
+  PlcRig p;
+  Rig& r = p.rig;
+  ASSERT_TRUE(r.enable());
+  r.step(20);
+  auto v = r.loop.status().reset_verdicts;
+  r.loop.post({CommandKind::kReset});  // READY: refused at once, a verdict
+  r.step(2);
+  EXPECT_EQ(r.loop.status().reset_verdicts, v + 1);
+  EXPECT_FALSE(r.loop.status().reset_pending);
+
+  ASSERT_EQ(p.plc.force("limit_y_pos", "TRUE"), "");
+  r.step(600);
+  ASSERT_EQ(r.loop.status().state, MachineState::kFault);
+  v = r.loop.status().reset_verdicts;
+  r.loop.post({CommandKind::kReset});
+  r.step(200);
+  EXPECT_TRUE(r.loop.status().reset_pending);
+  EXPECT_EQ(r.loop.status().reset_verdicts, v);  // not decided yet
+  ASSERT_EQ(p.plc.unforce("limit_y_pos"), "");
+  int k = 0;
+  while (r.loop.status().reset_verdicts == v && k < 49) {
+    r.step(1);
+    ++k;
+  }
+  EXPECT_EQ(r.loop.status().reset_verdicts, v + 1) << "decided inside the window";
+  EXPECT_FALSE(r.loop.status().reset_pending);
+  EXPECT_NE(r.loop.status().state, MachineState::kFault);
+
+  r.step(50);
+  ASSERT_EQ(p.plc.force("limit_y_pos", "TRUE"), "");
+  r.step(600);
+  ASSERT_EQ(r.loop.status().state, MachineState::kFault);
+  v = r.loop.status().reset_verdicts;
+  const std::size_t mark = r.events.size();
+  r.loop.post({CommandKind::kReset});
+  r.step(240);
+  EXPECT_EQ(r.loop.status().reset_verdicts, v);
+  EXPECT_FALSE(refused(r, CommandKind::kReset, mark));
+  r.step(20);
+  EXPECT_EQ(r.loop.status().reset_verdicts, v + 1) << "refused when the window closed";
+  EXPECT_TRUE(refused(r, CommandKind::kReset, mark));
+  EXPECT_EQ(r.loop.status().state, MachineState::kFault);
+}
+
 // A PLC E-stop request: ESTOP at once, reset refused while it is requested.
 TEST(PlcLoop, EstopRequestAndItsReset) {
   config::Config cfg = test_rig::sim_config();
