@@ -38,7 +38,9 @@ ctest --test-dir "build/$preset" -LE "$exclude" --output-on-failure -j "$(nproc)
 if [ "$hil" = 1 ]; then
   echo "== HIL tests ($preset) under tools/with-vcan =="
   hil_label="hil"
-  tools/with-vcan --ifaces vcan0,vcan1 -- \
+  # The HIL suite takes ~5 min on a quiet 2-core machine; with-vcan's default bound (600 s) left
+  # too little room on a loaded one (seen: killed at test 37 of 46 while a build ran beside it).
+  tools/with-vcan --ifaces vcan0,vcan1 --timeout 1500 -- \
     ctest --test-dir "build/$preset" -L "$hil_label" -LE "$([ "$slow" = 1 ] && echo '^$' || echo slow)" \
     --output-on-failure || status=1
   if [ "$slow" = 1 ]; then
