@@ -240,6 +240,13 @@ json Daemon::status_json() {
   if (st.fault_axis >= 0 || st.cause != FaultCause::kNone) {
     j["fault"] = {{"cause", to_string(st.cause)}, {"axis", st.fault_axis},
                   {"value", st.fault_value}, {"limit", st.fault_limit}};
+    // A heartbeat loss and an I/O-module fault name a CANopen node, not an axis: "axis" carries
+    // its node-id (as before), and "node" says so; an axis cause gets the axis' name.
+    if (st.cause == FaultCause::kHeartbeatLost || st.cause == FaultCause::kIoModule) {
+      j["fault"]["node"] = st.fault_axis;
+    } else if (st.fault_axis >= 0 && st.fault_axis < axes) {
+      j["fault"]["axis_name"] = cfg_.machine.axes[static_cast<std::size_t>(st.fault_axis)].name;
+    }
   }
   // A programmed pause (M0, M1, M6): what it waits for. An M6 is a manual tool change.
   if (st.interp_holding) {

@@ -159,6 +159,7 @@ TEST(Cia401Hil, AModuleThatStopsSendingItsTpdoFaultsTheMachineNamingTheNode) {
   ASSERT_EQ(st["state"], "FAULT") << st.dump() << "\n" << d.log();
   EXPECT_EQ(st["cause"], "I/O module fault") << st.dump();
   EXPECT_EQ(st["fault"].value("axis", 0), 5) << "the node-id: " << st.dump();
+  EXPECT_EQ(st["fault"].value("node", 0), 5) << "fault.node names the module: " << st.dump();
   // The log names the node, in the FAULT line and the master's event.
   std::string log;
   for (int i = 0; i < 500; ++i) {

@@ -204,3 +204,33 @@ TEST(PlcDaemon, AFaultAtStartUpLeavesTheDaemonUpInFaultUntilReset) {
 }
 
 }  // namespace
+
+// An overtravel switch of the example machine logic faults its axis: status.fault names the axis
+// by index and by name. A reset while the switch is still actuated is answered with the loop's
+// verdict (refused, naming what is missing, once its 250-cycle window has closed); released, the
+// next reset brings READY.
+TEST(PlcDaemon, AnOvertravelFaultNamesTheAxisAndTheResetReplyIsTheLoopsVerdict) {
+  contour::test::DaemonProcess d("overtravel", with_config("/config/sim.yaml"));
+  ASSERT_TRUE(d.connected()) << d.log();
+  ASSERT_EQ(d.state(), "READY") << d.log();
+  d.ok({{"cmd", "io"}, {"action", "force"}, {"name", "limit_y_pos"}, {"value", true}});
+  json st = d.wait_status([](const json& s) { return s["state"] == "FAULT"; });
+  ASSERT_EQ(st["state"], "FAULT") << st.dump() << "\n" << d.log();
+  EXPECT_EQ(st["fault"].value("axis", -1), 1) << st.dump();
+  EXPECT_EQ(st["fault"].value("axis_name", ""), "Y") << st.dump();
+  EXPECT_FALSE(st["fault"].contains("node")) << st.dump();
+
+  const auto c0 = st["cycle"].get<std::uint64_t>();
+  const json refused = d.call({{"cmd", "reset"}});
+  EXPECT_FALSE(refused.value("ok", true)) << refused.dump();
+  EXPECT_EQ(refused.value("error", "").rfind("reset refused: ", 0), 0u) << refused.dump();
+  st = d.ok({{"cmd", "status"}});
+  EXPECT_GE(st["cycle"].get<std::uint64_t>(), c0 + 250) << "answered before the loop's window closed";
+  EXPECT_EQ(st["state"], "FAULT") << st.dump();
+
+  d.ok({{"cmd", "io"}, {"action", "unforce"}, {"name", "limit_y_pos"}});
+  d.ok({{"cmd", "reset"}});
+  st = d.wait_status([](const json& s) { return s["state"] == "READY"; });
+  EXPECT_EQ(st["state"], "READY") << st.dump() << "\n" << d.log();
+  EXPECT_EQ(d.terminate_and_wait(SIGTERM), 0) << d.log();
+}
