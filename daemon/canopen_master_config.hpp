@@ -57,6 +57,16 @@ inline void add_digital_io(const config::Config& cfg, drivers::canopen::MasterCo
   }
 }
 
+// The axes homed on a switch with home.use_index map the drive's touch probe 1 (0x60B8 in an
+// RPDO, 0x60B9 + 0x60BA in a TPDO: NodeSetup::touch_probe), the encoder index latch. Axis i is
+// node i of `c`; other nodes map nothing of it.
+inline void add_touch_probe(const config::Config& cfg, drivers::canopen::MasterConfig& c) {
+  for (std::size_t a = 0; a < cfg.machine.axes.size() && a < c.nodes.size(); ++a) {
+    const config::HomeConfig& h = cfg.machine.axes[a].home;
+    if (h.method == config::HomeConfig::Method::kSwitch && h.use_index) c.nodes[a].touch_probe = true;
+  }
+}
+
 // The PLC's cia401 bindings (plc.signals) -> one CiA 401 I/O module node per node-id, after the
 // drives, in the order the signals first name them; each maps only the sub-indices the signals
 // use (IoModuleMap). Heartbeat and transmission type: bus.drives' (heartbeat_ms,
@@ -151,6 +161,7 @@ inline drivers::canopen::MasterConfig master_config_from(const config::Config& c
     c.nodes.push_back(s);
   }
   add_digital_io(cfg, c);
+  add_touch_probe(cfg, c);
   add_io_modules(cfg, c);
   return c;
 }

@@ -181,6 +181,22 @@ inline std::int16_t as_i16(std::int64_t raw) noexcept {
 }
 
 // ---- CiA 402
+// 0x60B8 touch probe function bits (CiA 402): bit 0 enables touch probe 1, bit 1 = 0 latches the
+// first event only (1: continuous), bits 2..3 the trigger (00 the touch probe 1 input, 01 the
+// position encoder's zero impulse, i.e. its index), bit 4 enables the latch on the positive edge
+// (bit 5: negative edge). A new arm needs bit 0 or bit 4 to go 0 -> 1 at the drive.
+inline constexpr std::uint16_t kTouchProbe1Enable = 0x0001;
+inline constexpr std::uint16_t kTouchProbe1Continuous = 0x0002;
+inline constexpr std::uint16_t kTouchProbe1TriggerIndex = 0x0004;
+inline constexpr std::uint16_t kTouchProbe1TriggerMask = 0x000C;
+inline constexpr std::uint16_t kTouchProbe1PositiveEdge = 0x0010;
+// Armed on the encoder index, first event, positive edge: 0x0015.
+inline constexpr std::uint16_t kTouchProbe1ArmIndex =
+    kTouchProbe1Enable | kTouchProbe1TriggerIndex | kTouchProbe1PositiveEdge;
+// 0x60B9 bits: touch probe 1 enabled, its positive-edge position (0x60BA) stored.
+inline constexpr std::uint16_t kTouchProbe1Enabled = 0x0001;
+inline constexpr std::uint16_t kTouchProbe1PositiveStored = 0x0002;
+
 enum class Cia402State {
   kNotReadyToSwitchOn,
   kSwitchOnDisabled,

@@ -37,6 +37,19 @@ bool skipped(const NodeSetup& n, std::uint16_t index, std::uint8_t sub) {
   return false;
 }
 
+// The PDO numbers (0: PDO1) of NodeSetup::touch_probe: the TPDO after the digital inputs'; the
+// RPDO 0 (0x60B8 appended to RPDO1) when RPDO1 has 2 bytes and an entry to spare on this drive,
+// else the one after the digital outputs'. {-1, -1} without the touch probe.
+TouchProbePdos touch_probe_layout(const NodeSetup& n) {
+  TouchProbePdos p;
+  if (!n.touch_probe || n.kind != NodeKind::kDrive) return p;
+  p.tpdo = static_cast<std::int8_t>(n.digital_inputs ? 2 : 1);
+  const bool fits = n.rpdo.bytes() + 2 <= 8 && n.rpdo.count < PdoMapping::kMaxEntries &&
+                    n.rpdo.count < n.quirks.rpdo_max_entries;
+  p.rpdo = static_cast<std::int8_t>(fits ? 0 : (n.digital_output_mask != 0 ? 2 : 1));
+  return p;
+}
+
 std::string entries_text(const PdoMapping& m) {
   std::string s;
   for (std::size_t k = 0; k < m.count; ++k) s += (k ? ", " : "") + hex(m.entries[k].index, 4);
@@ -60,6 +73,8 @@ std::vector<CanFilter> master_rx_filters(const MasterConfig& cfg) {
     }
     f.push_back({kCobTpdo[0] + n.node_id, 0x7FF});
     if (n.digital_inputs) f.push_back({kCobTpdo[1] + n.node_id, 0x7FF});
+    if (const auto p = touch_probe_layout(n); p.tpdo > 0 && p.tpdo < 4)
+      f.push_back({kCobTpdo[static_cast<std::size_t>(p.tpdo)] + n.node_id, 0x7FF});
   }
   return f;
 }
@@ -100,6 +115,21 @@ PdoMapping digital_outputs_rpdo() {
   return p;
 }
 
+PdoMapping touch_probe_tpdo() {
+  PdoMapping p;
+  p.entries[0] = {0x60B9, 0, 16};
+  p.entries[1] = {0x60BA, 0, 32};
+  p.count = 2;
+  return p;
+}
+
+PdoMapping touch_probe_rpdo() {
+  PdoMapping p;
+  p.entries[0] = {0x60B8, 0, 16};
+  p.count = 1;
+  return p;
+}
+
 PdoMapping default_rpdo(DriveMode m) {
   PdoMapping p;
   p.entries[0] = {0x6040, 0, 16};
@@ -122,6 +152,7 @@ Master::Master(CanBus& bus, MasterConfig cfg, Log log_fn)
   if (cfg_.nodes.empty()) throw StartupError("bus: no nodes configured");
   std::vector<CyclicFrame> frames{{0, 1}};  // SYNC
   io_pdos_.resize(cfg_.nodes.size());
+  probe_pdos_.resize(cfg_.nodes.size());
   for (std::size_t i = 0; i < cfg_.nodes.size(); ++i) {
     const auto& n = cfg_.nodes[i];
     const std::string who = node_label(n.node_id);
@@ -183,11 +214,30 @@ Master::Master(CanBus& bus, MasterConfig cfg, Log log_fn)
     if (n.digital_output_mask != 0 && q.rpdos < 2)
       throw StartupError(who + ": 0x60FE:01 digital outputs (plc cia402 output binding) need "
                                "RPDO2, the drive has 1 RPDO" + prof);
+    // The touch probe (home.use_index): its status and position in a TPDO of their own (with
+    // 0x60FD they would need 10 bytes); 0x60B8 in RPDO1 when it fits, else an RPDO of its own.
+    const TouchProbePdos probe = touch_probe_layout(n);
+    if (probe.tpdo > 0 && q.tpdos <= probe.tpdo)
+      throw StartupError(who + ": 0x60B9/0x60BA touch probe status and position (home.use_index) need TPDO" +
+                         std::to_string(probe.tpdo + 1) + ", the drive has " +
+                         std::to_string(q.tpdos) + (q.tpdos == 1 ? " TPDO" : " TPDOs") + prof);
+    if (probe.rpdo > 0 && q.rpdos <= probe.rpdo)
+      throw StartupError(who + ": 0x60B8 touch probe function (home.use_index) does not fit into RPDO1 (" +
+                         entries_text(n.rpdo) + ") and needs RPDO" + std::to_string(probe.rpdo + 1) +
+                         ", the drive has " + std::to_string(q.rpdos) +
+                         (q.rpdos == 1 ? " RPDO" : " RPDOs") + prof);
+    if (probe.rpdo == 0) {
+      PdoMapping& m = cfg_.nodes[i].rpdo;  // `n` is this node: it sees the appended entry
+      m.entries[m.count++] = touch_probe_rpdo().entries[0];
+    }
+    probe_pdos_[i] = probe;
     const int every = n.sync_every < 1 ? 1 : n.sync_every;
     frames.push_back({static_cast<int>(n.rpdo.bytes()), every});
     frames.push_back({static_cast<int>(n.tpdo.bytes()), every});
     if (n.digital_inputs) frames.push_back({4, every});
     if (n.digital_output_mask != 0) frames.push_back({4, every});
+    if (probe.tpdo > 0) frames.push_back({static_cast<int>(touch_probe_tpdo().bytes()), every});
+    if (probe.rpdo > 0) frames.push_back({static_cast<int>(touch_probe_rpdo().bytes()), every});
   }
   load_ = estimate_bus_load(frames, cfg_.bitrate, cfg_.period_us * 1e-6);
   char msg[200];
@@ -384,6 +434,27 @@ void Master::check_digital_io(const NodeSetup& n) {
   }
 }
 
+// The touch probe objects, checked before they are mapped (as check_digital_io: a drive without
+// them is refused naming the object and why, not by an abort on a mapping object).
+void Master::check_touch_probe(const NodeSetup& n) {
+  if (!n.touch_probe) return;
+  const std::string who = node_label(n.node_id);
+  auto need = [&](std::uint16_t index, const char* what) {
+    try {
+      sdo_upload(n.node_id, index, 0);
+    } catch (const SdoAbortError& e) {
+      if (!e.from_server()) throw;
+      throw StartupError(who + ": " + object_name(index, 0) + " " + what +
+                         ", needed by home.use_index (the encoder index latch): the drive does "
+                         "not provide it (SDO abort " +
+                         hex(e.code(), 8) + " " + sdo_abort_text(e.code()) + ")");
+    }
+  };
+  need(0x60B8, "touch probe function");
+  need(0x60B9, "touch probe status");
+  need(0x60BA, "touch probe 1 positive edge position");
+}
+
 namespace {
 bool missing_object_abort(const SdoAbortError& e) {
   return e.from_server() && (e.code() == 0x06020000 || e.code() == 0x06090011);
@@ -564,12 +635,29 @@ void Master::configure_node(const NodeSetup& n) {
                        (disp.empty() ? std::string("?") : std::to_string(static_cast<std::int8_t>(disp[0]))) +
                        " after writing 0x6060 = " + std::to_string(static_cast<int>(n.mode)));
   check_digital_io(n);
-  configure_pdo(n, true, n.rpdo);
-  if (n.digital_output_mask != 0) configure_pdo(n, true, digital_outputs_rpdo(), 1);
-  disable_pdos(n, true, n.digital_output_mask != 0 ? 2 : 1);
+  check_touch_probe(n);
+  const TouchProbePdos probe = probe_pdos_[static_cast<std::size_t>(index_of(id))];
+  configure_pdo(n, true, n.rpdo);  // with 0x60B8 when probe.rpdo == 0
+  std::uint16_t rx_used = 1, tx_used = 1;
+  if (n.digital_output_mask != 0) {
+    configure_pdo(n, true, digital_outputs_rpdo(), 1);
+    rx_used = 2;
+  }
+  if (probe.rpdo > 0) {
+    configure_pdo(n, true, touch_probe_rpdo(), static_cast<std::uint16_t>(probe.rpdo));
+    rx_used = static_cast<std::uint16_t>(probe.rpdo + 1);
+  }
+  disable_pdos(n, true, rx_used);
   configure_pdo(n, false, n.tpdo);
-  if (n.digital_inputs) configure_pdo(n, false, digital_inputs_tpdo(), 1);
-  disable_pdos(n, false, n.digital_inputs ? 2 : 1);
+  if (n.digital_inputs) {
+    configure_pdo(n, false, digital_inputs_tpdo(), 1);
+    tx_used = 2;
+  }
+  if (probe.tpdo > 0) {
+    configure_pdo(n, false, touch_probe_tpdo(), static_cast<std::uint16_t>(probe.tpdo));
+    tx_used = static_cast<std::uint16_t>(probe.tpdo + 1);
+  }
+  disable_pdos(n, false, tx_used);
 }
 
 void Master::start_up() {
@@ -688,6 +776,25 @@ void Master::dispatch(const CanFrame& f, bool in_cycle) noexcept {
     if (int k = m.find(0x606C); k >= 0) r.velocity_counts_s = as_i32(v[static_cast<std::size_t>(k)]);
     r.tpdo_fresh = true;
     ++r.tpdo_received;
+    return;
+  }
+  for (std::size_t k = 1; k < 4; ++k) {
+    // The touch probe's TPDO: {0x60B9 status, 0x60BA position}, 6 bytes.
+    const std::uint8_t n = node_of(id, kCobTpdo[k]);
+    const int i = n != 0 ? index_of(n) : -1;
+    if (i < 0 || probe_pdos_[static_cast<std::size_t>(i)].tpdo != static_cast<int>(k)) continue;
+    if (f.dlc != 6) {
+      ++counters_.malformed_frames;
+      return;
+    }
+    if (!in_cycle) {
+      ++counters_.late_or_stray_frames;
+      return;
+    }
+    auto& r = rt_[static_cast<std::size_t>(i)];
+    r.touch_probe_status = get_u16(f.data.data());
+    r.touch_probe_position_raw = static_cast<std::int32_t>(get_u32(&f.data[2]));
+    r.touch_probe_fresh = true;
     return;
   }
   if (std::uint8_t n = node_of(id, kCobTpdo[1]); n != 0 && index_of(n) >= 0 &&
@@ -827,6 +934,7 @@ CycleStatus Master::begin_cycle(std::int64_t now_ns) noexcept {
     r.tpdo_fresh = cfg_.nodes[i].kind == NodeKind::kIoModule && io_pdos_[i].ntx == 0;
     r.io_tpdos_in = 0;
     r.digital_inputs_fresh = false;
+    r.touch_probe_fresh = false;
   }
   sync_mono_ns_ = mono_ns();
   const SendResult s = bus_.send(sync_frame());
@@ -863,7 +971,8 @@ CycleStatus Master::collect() noexcept {
   auto all_in = [&] {
     for (std::size_t i = 0; i < rt_.size(); ++i)
       if (expected(i) && (!rt_[i].tpdo_fresh ||
-                          (cfg_.nodes[i].digital_inputs && !rt_[i].digital_inputs_fresh)))
+                          (cfg_.nodes[i].digital_inputs && !rt_[i].digital_inputs_fresh) ||
+                          (probe_pdos_[i].tpdo > 0 && !rt_[i].touch_probe_fresh)))
         return false;
     return true;
   };
@@ -889,6 +998,7 @@ CycleStatus Master::collect() noexcept {
         ++r.missed_total;
       }
       if (n.digital_inputs && !r.digital_inputs_fresh) ++r.digital_inputs_missed;
+      if (probe_pdos_[i].tpdo > 0 && !r.touch_probe_fresh) ++r.touch_probe_missed;
     }
     if (r.missed_streak >= static_cast<std::uint32_t>(cfg_.missed_tpdo_fault) &&
         (r.faults & static_cast<std::uint8_t>(NodeFault::kTpdoMissed)) == 0) {
@@ -938,6 +1048,8 @@ CycleStatus Master::send_rpdos() noexcept {
       else if (idx == 0x60FF || idx == 0x607A) v[k] = static_cast<std::uint32_t>(target);
       else if (idx == 0x6060)
         v[k] = static_cast<std::uint8_t>(r.rpdo_mode != 0 ? r.rpdo_mode : static_cast<std::int8_t>(n.mode));
+      else if (idx == 0x60B8)
+        v[k] = r.touch_probe_function;
     }
     CanFrame f;
     f.id = kCobRpdo[0] + n.node_id;
@@ -950,6 +1062,15 @@ CycleStatus Master::send_rpdos() noexcept {
       o.id = kCobRpdo[1] + n.node_id;
       o.dlc = 4;
       put_u32(o.data.data(), r.digital_outputs & n.digital_output_mask);
+      const SendResult so = bus_.send(o);
+      if (so == SendResult::kDropped) ++counters_.tx_dropped;
+      if (so == SendResult::kError) err = true;
+    }
+    if (const auto k = probe_pdos_[i].rpdo; k > 0) {
+      CanFrame o;
+      o.id = kCobRpdo[static_cast<std::size_t>(k)] + n.node_id;
+      o.dlc = 2;
+      put_u16(o.data.data(), r.touch_probe_function);
       const SendResult so = bus_.send(o);
       if (so == SendResult::kDropped) ++counters_.tx_dropped;
       if (so == SendResult::kError) err = true;

@@ -121,6 +121,22 @@ struct NodeSetup {
   // constructor / start_up() name the node and the object).
   bool digital_inputs = false;
   std::uint32_t digital_output_mask = 0;
+  // CiA 402 touch probe 1 (the encoder index latch of home.use_index): 0x60B8 (touch probe
+  // function, 16 bits) is appended to RPDO1 when RPDO1 has 2 bytes and an entry to spare (the
+  // default {0x6040, 0x60FF|0x607A} has), else mapped alone into the next free RPDO (RPDO2, or
+  // RPDO3 after the digital outputs); 0x60B9 (status, 16 bits) + 0x60BA (touch probe 1
+  // positive-edge position, 32 bits) into a TPDO of their own, the next free one (TPDO2, or
+  // TPDO3 after the digital inputs), same transmission type as TPDO1. Off (the default): nothing
+  // of it is mapped. A drive without the three objects, or without the PDOs, is refused at
+  // start-up naming the node and the object (touch_probe_pdos() says where they went).
+  bool touch_probe = false;
+};
+
+// Where NodeSetup::touch_probe went (Master::touch_probe_pdos): PDO numbers from 0 (0: PDO1),
+// -1 when the node has no touch probe mapped. rpdo 0: 0x60B8 rides in RPDO1.
+struct TouchProbePdos {
+  std::int8_t rpdo = -1;
+  std::int8_t tpdo = -1;
 };
 
 struct MasterConfig {
@@ -224,6 +240,14 @@ struct NodeRuntime {
   bool digital_inputs_fresh = false;
   std::uint64_t digital_inputs_missed = 0;  // cycles TPDO2 was due and did not come
   std::uint32_t digital_outputs = 0;        // 0x60FE:01 sent in RPDO2 (masked)
+  // NodeSetup::touch_probe: 0x60B8 sent each cycle (set_touch_probe_function), 0x60B9 and 0x60BA
+  // (raw: the drive's 32-bit position register, wraps like 0x6064) as last received, and whether
+  // they came this cycle.
+  std::uint16_t touch_probe_function = 0;
+  std::uint16_t touch_probe_status = 0;
+  std::int32_t touch_probe_position_raw = 0;
+  bool touch_probe_fresh = false;
+  std::uint64_t touch_probe_missed = 0;  // cycles its TPDO was due and did not come
   // NodeKind::kIoModule: the inputs as last received (sub-index k + 1 at [k]; only the mapped
   // ones change), which of its TPDOs came this cycle (bit p: TPDO p+1; tpdo_fresh once all
   // have), and the outputs sent in its RPDOs (set_io_outputs).
@@ -288,6 +312,10 @@ class Master {
   void set_digital_outputs(std::size_t i, std::uint32_t v) noexcept {
     rt_[i].digital_outputs = v & cfg_.nodes[i].digital_output_mask;
   }
+  // 0x60B8 for the next cycle's RPDO (NodeSetup::touch_probe; ignored otherwise). RT-safe.
+  void set_touch_probe_function(std::size_t i, std::uint16_t v) noexcept {
+    rt_[i].touch_probe_function = v;
+  }
   // CiA 401 outputs of I/O module node i (0x6200:01..08, 0x6411:01..08) for its next RPDOs;
   // sub-indices it does not map are not sent. RT-safe (copies 24 bytes).
   void set_io_outputs(std::size_t i, const std::array<std::uint8_t, kIoChannels>& digital,
@@ -324,6 +352,7 @@ class Master {
   [[nodiscard]] const NodeRuntime& node(std::size_t i) const noexcept { return rt_[i]; }
   [[nodiscard]] const NodeSetup& setup(std::size_t i) const noexcept { return cfg_.nodes[i]; }
   [[nodiscard]] int index_of(std::uint8_t node_id) const noexcept;
+  [[nodiscard]] TouchProbePdos touch_probe_pdos(std::size_t i) const noexcept { return probe_pdos_[i]; }
   [[nodiscard]] const MasterCounters& counters() const noexcept { return counters_; }
   [[nodiscard]] const BusLoad& bus_load() const noexcept { return load_; }
   [[nodiscard]] const MasterConfig& config() const noexcept { return cfg_; }
@@ -341,6 +370,7 @@ class Master {
   void configure_pdo(const NodeSetup& n, bool rx, const PdoMapping& m, std::uint16_t k = 0);
   void disable_pdos(const NodeSetup& n, bool rx, std::uint16_t from);
   void check_digital_io(const NodeSetup& n);
+  void check_touch_probe(const NodeSetup& n);
   void configure_io_module(const NodeSetup& n);
   // A TPDO's values if its length and mapping fit and it came inside the cycle; otherwise false,
   // counted as malformed or late.
@@ -375,6 +405,7 @@ class Master {
     std::uint8_t ntx = 0, nrx = 0;
   };
   std::vector<IoPdos> io_pdos_;  // per node (empty mappings for drives)
+  std::vector<TouchProbePdos> probe_pdos_;  // per node
   std::array<std::int16_t, 128> index_by_node_{};
   std::vector<bool> booted_;
   MasterCounters counters_{};
@@ -389,8 +420,9 @@ class Master {
   bool heartbeat_on_ = true;
 };
 
-// Kernel receive filters for the master's socket: EMCY, TPDO1, SDO responses and heartbeats of
-// the configured nodes (everything else is dropped by the kernel, not by the RT thread).
+// Kernel receive filters for the master's socket: EMCY, TPDO1 (and the TPDOs of the digital
+// inputs and the touch probe), SDO responses and heartbeats of the configured nodes
+// (everything else is dropped by the kernel, not by the RT thread).
 std::vector<CanFilter> master_rx_filters(const MasterConfig& cfg);
 
 // The default leanest mappings (issue 7): RPDO {0x6040, 0x60FF|0x607A}, TPDO {0x6041, 0x6064}.
@@ -400,6 +432,10 @@ PdoMapping default_tpdo();
 // RPDO2 {0x60FE:01}.
 PdoMapping digital_inputs_tpdo();
 PdoMapping digital_outputs_rpdo();
+// The touch probe PDOs of NodeSetup::touch_probe: TPDO {0x60B9:00, 0x60BA:00} (6 bytes), and
+// the RPDO {0x60B8:00} used when 0x60B8 does not fit into RPDO1.
+PdoMapping touch_probe_tpdo();
+PdoMapping touch_probe_rpdo();
 // The PDOs of a CiA 401 module (IoModuleMap): TPDOs (rx false) or RPDOs (rx true), in order,
 // each at most 8 bytes; empty when the direction maps nothing.
 std::vector<PdoMapping> io_module_pdos(const IoModuleMap& io, bool rx);
