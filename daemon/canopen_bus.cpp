@@ -83,6 +83,7 @@ void CanopenBus::init(const config::Config& cfg) {
   for (int i = 0; i < axes_; ++i) {
     csp_[static_cast<std::size_t>(i)] =
         mcfg_.nodes[static_cast<std::size_t>(i)].mode == co::DriveMode::kCsp;
+    probe_[static_cast<std::size_t>(i)].mapped = mcfg_.nodes[static_cast<std::size_t>(i)].touch_probe;
   }
   period_s_ = cfg.machine.period_s;
   lockstep_ = cfg.bus_lockstep;
@@ -137,6 +138,7 @@ void CanopenBus::start() {
   master_->set_request_all(co::DriveRequest::kDisabled);
   cycle_ = 0;
   last_mode_ = DriveMode::kDisabled;
+  for (auto& p : probe_) p = ProbeSeq{p.mapped};
   started_ = true;
   if (event_thread_wanted_ && log_) {
     stop_events_ = false;
@@ -178,6 +180,7 @@ void CanopenBus::run_cycles_for_stop() noexcept {
     for (std::size_t i = 0; i < master_->size(); ++i) {
       master_->set_target(i, 0);
       master_->set_digital_outputs(i, 0);  // the PLC's drive outputs off with the drives
+      master_->set_touch_probe_function(i, 0);
     }
     for (int m = 0; m < io_count_; ++m)  // and the CiA 401 modules' outputs
       master_->set_io_outputs(static_cast<std::size_t>(io_index_[static_cast<std::size_t>(m)]), {},
@@ -258,6 +261,24 @@ void CanopenBus::read(BusFeedback& fb) noexcept {
         have_last_[i] = true;
       }
     }
+    ProbeSeq& p = probe_[i];
+    if (p.mapped && r.touch_probe_fresh) {
+      const std::uint16_t st = r.touch_probe_status;
+      constexpr std::uint16_t kLatch = co::kTouchProbe1Enabled | co::kTouchProbe1PositiveStored;
+      if (p.step == ProbeStep::kOff) {
+        p.off_seen = (st & co::kTouchProbe1Enabled) == 0;
+      } else if (p.step == ProbeStep::kArmed && (st & kLatch) == kLatch) {
+        // The unwrapped position plus the 32-bit difference of the two raw registers: the same
+        // unwrapping as position_mm (valid within 2^31 counts of this cycle's 0x6064).
+        const auto diff = static_cast<std::int32_t>(
+            static_cast<std::uint32_t>(r.touch_probe_position_raw) - static_cast<std::uint32_t>(r.position_raw));
+        p.latched_counts = r.position_counts + diff;
+        p.step = ProbeStep::kLatched;
+      }
+    }
+    f.index_present = p.mapped;
+    f.index_latched = p.step == ProbeStep::kLatched;
+    f.index_position_mm = f.index_latched ? co::counts_to_mm(p.latched_counts, cpm) : 0.0;
     f.digital_inputs_present = master_->setup(i).digital_inputs;
     f.digital_inputs_fresh = f.digital_inputs_present && r.digital_inputs_fresh;
     f.digital_inputs = r.digital_inputs;
@@ -339,6 +360,15 @@ void CanopenBus::write(const AxisCommands& cmd) noexcept {
       master_->set_target(a, co::mm_s_to_counts_s(cmd.velocity_mm_s[a], counts_per_mm_[a]));
     }
     master_->set_digital_outputs(a, cmd.digital_outputs[a] & cmd.digital_output_mask[a]);
+    if (ProbeSeq& p = probe_[a]; p.mapped) {
+      if (!cmd.index_arm[a]) {
+        if (p.step != ProbeStep::kOff) p.off_seen = false;  // wait for the drive to show the 0
+        p.step = ProbeStep::kOff;
+      } else if (p.step == ProbeStep::kOff && p.off_seen) {
+        p.step = ProbeStep::kArmed;  // 0 -> 0x0015 at the drive: the edge that arms it
+      }
+      master_->set_touch_probe_function(a, p.step == ProbeStep::kOff ? 0 : co::kTouchProbe1ArmIndex);
+    }
   }
   if (spindle_index_ >= 0) {
     const auto s = static_cast<std::size_t>(spindle_index_);

@@ -16,6 +16,15 @@
 //   digital I/O (axes a plc.signals cia402 binding names; daemon/PLC.md "Drive I/O"): 0x60FD
 //   from TPDO2 -> AxisFeedback::digital_inputs (present, fresh when TPDO2 came this cycle);
 //   AxisCommands::digital_outputs & mask -> 0x60FE:01 in RPDO2; 0 on stop()
+//   encoder index latch (axes homed on a switch with home.use_index: the drive's touch probe 1,
+//   NodeSetup::touch_probe): AxisCommands::index_arm -> 0x60B8 = 0x0015 (touch probe 1 on,
+//   first event, trigger = the encoder's zero impulse, positive edge), false -> 0x0000. An arm
+//   is an edge at the drive: it is sent only once a 0x60B9 received after the disarm shows touch
+//   probe 1 off (bit 0 clear: the drive has seen the 0, and bit 1 of an earlier arm is gone), so
+//   0x60B9 bits 0 + 1 received after that are this arm's latch: AxisFeedback::index_latched, and
+//   index_position_mm = 0x60BA of the same TPDO, unwrapped against this cycle's 0x6064 (the
+//   32-bit difference added to the unwrapped position) / counts_per_mm: the coordinates of
+//   position_mm exactly. index_present for exactly these axes. 0x60B8 = 0 on stop().
 //   CiA 401 I/O modules (nodes plc.signals cia401 bindings name; daemon/PLC.md "CAN I/O
 //   modules"): their TPDOs -> BusFeedback::io (0x6000:xx, 0x6401:xx), AxisCommands::io ->
 //   their RPDOs (0x6200:xx, 0x6411:xx), matched by node-id; 0 on stop()
@@ -139,6 +148,15 @@ class CanopenBus final : public AxisBus {
     std::uint32_t detail = 0;
   };
   std::array<HomeSeq, kMaxAxes> home_{};
+  // The encoder index latch (touch probe 1) of an axis, see the header comment.
+  enum class ProbeStep : std::uint8_t { kOff, kArmed, kLatched };
+  struct ProbeSeq {
+    bool mapped = false;    // NodeSetup::touch_probe
+    ProbeStep step = ProbeStep::kOff;
+    bool off_seen = false;  // kOff: a 0x60B9 with bit 0 clear came since the disarm was sent
+    std::int64_t latched_counts = 0;  // kLatched: 0x60BA, unwrapped
+  };
+  std::array<ProbeSeq, kMaxAxes> probe_{};
   std::array<double, kMaxAxes> max_step_counts_{};  // position step that is a reset, not motion
   void run_cycles_for_stop() noexcept;
 

@@ -239,8 +239,9 @@ const char* homing_failure_text(std::uint8_t code) noexcept {
     case 3: return "the home switch did not open again within search_distance_mm";
     case 4: return "the home switch did not close again on the latch approach";
     case 6:
-      return "home.use_index, but this bus cannot latch the axis' encoder index (the CANopen master "
-             "does not map the touch probe 0x60B8-0x60BA; simulated machine: sim.index_pitch_mm)";
+      return "home.use_index, but this bus cannot latch the axis' encoder index (simulated "
+             "machine: no sim.index_pitch_mm; CANopen maps the drive's touch probe 0x60B8-0x60BA "
+             "at start-up and refuses a drive that lacks those objects or has one PDO)";
     case 7: return "no encoder index within search_distance_mm after the home switch";
     case 8:
       return "home.method drive, but this bus cannot ask the drive to home itself (CiA 402 homing "
