@@ -7,6 +7,11 @@
 // positive_limit and home_switch switches at its soft limits; --input-switch
 // NODE:BIT:above|below:POS_MM adds one (bit on while the position is above/below POS_MM).
 // 0x60FE:01 (digital outputs) is stored and readable over SDO.
+// Encoder index and touch probe 1 (0x60B8..0x60BA, sim_drive.hpp): each axis drive's encoder
+// has the index of its axis' machine.axes[].sim.index_pitch_mm / index_phase_mm (none without);
+// --index NODE|all:PITCH_MM[:PHASE_MM] sets it (pitch 0: none), --no-touch-probe NODE removes the
+// touch probe objects (a drive the master must refuse for home.use_index). The summary's axis
+// node entries gain "index_latches" and "last_index_mm" (true position of the last pulse latched).
 // CiA 401 I/O modules (sim_drive.hpp SimIoModule): --io-module NODE[:DI:DO:AI:AO] adds one
 // (DI/DO bytes of 0x6000/0x6200, AI/AO INTEGER16 channels of 0x6401/0x6411, 0..8 each, default
 // 2:2:2:2); its outputs are looped to its inputs each SYNC; --io-input NODE:SUB:VALUE pins
@@ -82,6 +87,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> missing_obj, pdos, tpdo_sampling;
   std::vector<long> expedited_only;
   std::vector<std::string> io_modules, io_inputs;
+  std::vector<std::string> index_opt;
+  std::vector<long> no_touch_probe;
   app.add_option("--config", config_path, "contourd YAML config (machine, bus)")->required();
   app.add_option("--can", iface, "CAN interface, e.g. vcan0")->required();
   app.add_option("--modbus", modbus, "HOST:PORT of the dynamometer Modbus TCP server");
@@ -107,6 +114,13 @@ int main(int argc, char** argv) {
   app.add_option("--tpdo-sampling", tpdo_sampling,
                  "NODE:sync|after_step when the node samples its TPDO: at SYNC before its step, "
                  "or after it (default: tpdo_sampling of the node's drive profile)");
+  app.add_option("--index", index_opt,
+                 "NODE|all:PITCH_MM[:PHASE_MM] the axis encoder's index: one pulse per PITCH_MM of "
+                 "true travel at PHASE_MM + k x PITCH_MM (default PHASE 0), latched by touch probe "
+                 "1 (0x60B8..0x60BA); PITCH 0: no index (default: machine.axes[].sim.index_pitch_mm "
+                 "and index_phase_mm)");
+  app.add_option("--no-touch-probe", no_touch_probe,
+                 "NODE the node's object dictionary lacks the touch probe 0x60B8, 0x60B9, 0x60BA");
   app.add_option("--io-module", io_modules,
                  "NODE[:DI:DO:AI:AO] a CiA 401 I/O module: DI/DO bytes (0x6000/0x6200), AI/AO "
                  "16-bit channels (0x6401/0x6411), 0..8 each (default 2:2:2:2); outputs looped "
@@ -261,6 +275,8 @@ int main(int argc, char** argv) {
       s.switches.push_back({0, ax.min_mm - 2.0, false});
       s.switches.push_back({1, ax.max_mm + 2.0, true});
       s.switches.push_back({2, ax.min_mm + 0.5, false});
+      s.index_pitch_mm = ax.sim_index_pitch_mm;  // the in-process SimBus' encoder index
+      s.index_phase_mm = ax.sim_index_phase_mm;
     }
     if (s.spindle) {
       s.counts_per_mm = 4096.0;  // counts per revolution
@@ -354,6 +370,38 @@ int main(int argc, char** argv) {
       if (v.size() > 2) s.quirks.pdo_max_entries = static_cast<int>(v[2]);
     }
     for (long n : expedited_only) find(n).quirks.expedited_only = true;
+    for (long n : no_touch_probe)
+      for (int index : {0x60B8, 0x60B9, 0x60BA})
+        find(n).quirks.missing.push_back({static_cast<std::uint16_t>(index), -1});
+    for (const auto& d : index_opt) {
+      // NODE|all:PITCH_MM[:PHASE_MM] (decimals, not parse_tuple's integers).
+      const auto c1 = d.find(':');
+      const auto c2 = c1 == std::string::npos ? c1 : d.find(':', c1 + 1);
+      auto number = [&](const std::string& t, double& x) {
+        char* end = nullptr;
+        x = std::strtod(t.c_str(), &end);
+        return !t.empty() && *end == '\0' && std::isfinite(x);
+      };
+      double pitch = 0.0, phase = 0.0;
+      if (c1 == std::string::npos ||
+          !number(d.substr(c1 + 1, c2 == std::string::npos ? std::string::npos : c2 - c1 - 1), pitch) ||
+          pitch < 0.0 || (c2 != std::string::npos && !number(d.substr(c2 + 1), phase)))
+        throw CLI::ValidationError("--index", "expected NODE|all:PITCH_MM(>= 0)[:PHASE_MM], got '" + d + "'");
+      const std::string node = d.substr(0, c1);
+      if (node == "all") {
+        for (std::size_t k = 0; k < drive_count; ++k) {
+          if (setups[k].spindle) continue;
+          setups[k].index_pitch_mm = pitch;
+          setups[k].index_phase_mm = phase;
+        }
+      } else {
+        auto& s = find(parse_tuple(node, 1, 1, "--index")[0]);
+        if (s.spindle || s.io.enabled)
+          throw CLI::ValidationError("--index", "node " + node + " is not an axis drive: '" + d + "'");
+        s.index_pitch_mm = pitch;
+        s.index_phase_mm = phase;
+      }
+    }
     for (const auto& d : io_inputs) {
       auto v = parse_tuple(d, 3, 3, "--io-input");
       auto& s = find(v[0]);
@@ -415,10 +463,10 @@ int main(int argc, char** argv) {
     for (const auto& s : setups) {
       filters.push_back({0x200u + s.node_id, 0x7FF});
       filters.push_back({0x300u + s.node_id, 0x7FF});  // RPDO2: 0x60FE:01 (drive digital outputs)
-      if (s.io.enabled) {  // a CiA 401 module's outputs may take RPDO3/4
-        filters.push_back({0x400u + s.node_id, 0x7FF});
-        filters.push_back({0x500u + s.node_id, 0x7FF});
-      }
+      // RPDO3: a drive's 0x60B8 (touch probe) when neither RPDO1 nor RPDO2 has room; a CiA 401
+      // module's outputs may take RPDO3/4.
+      filters.push_back({0x400u + s.node_id, 0x7FF});
+      if (s.io.enabled) filters.push_back({0x500u + s.node_id, 0x7FF});
       filters.push_back({0x600u + s.node_id, 0x7FF});
     }
     bus = std::make_unique<contour::drivers::SocketCan>(iface, filters);
@@ -555,6 +603,10 @@ int main(int argc, char** argv) {
       n["nmt"] = contour::drivers::canopen::nmt_state_name(d->nmt());
     } else {
       n["state"] = contour::drivers::canopen::cia402_state_name(d->state());
+      if (!d->is_spindle()) {
+        n["index_latches"] = d->index_latches();
+        if (d->index_latches() > 0) n["last_index_mm"] = d->last_index_mm();
+      }
     }
     j["nodes"].push_back(n);
   }

@@ -20,12 +20,13 @@ std::vector<std::uint8_t> le(std::int64_t v, std::size_t n) {
 bool rx_mappable(std::uint16_t i, std::uint8_t sub) {
   if (i == 0x6200 || i == 0x6411) return sub >= 1;  // CiA 401 outputs (I/O module)
   if (i == 0x60FE) return sub == 1;  // digital outputs, physical outputs
-  return sub == 0 && (i == 0x6040 || i == 0x607A || i == 0x60FF || i == 0x6060);
+  return sub == 0 && (i == 0x6040 || i == 0x607A || i == 0x60FF || i == 0x6060 || i == 0x60B8);
 }
 bool tx_mappable(std::uint16_t i, std::uint8_t sub) {
   if (i == 0x6000 || i == 0x6401) return sub >= 1;  // CiA 401 inputs (I/O module)
   return sub == 0 &&
-         (i == 0x6041 || i == 0x6064 || i == 0x606C || i == 0x6061 || i == 0x603F || i == 0x60FD);
+         (i == 0x6041 || i == 0x6064 || i == 0x606C || i == 0x6061 || i == 0x603F || i == 0x60FD ||
+          i == 0x60B9 || i == 0x60BA);
 }
 }  // namespace
 
@@ -95,6 +96,10 @@ void SimDrive::build_od() {
   ro(0x60FE, 0, 2, 1);
   rw(0x60FE, 1, 0, 4);
   rw(0x60FE, 2, 0, 4);
+  // Touch probe 1 (the encoder index latch): function, status, positive-edge position.
+  rw(0x60B8, 0, 0, 2);
+  ro(0x60B9, 0, 0, 2);
+  ro(0x60BA, 0, 0, 4);
   ro(0x60C2, 0, 2, 1);
   rw(0x60C2, 1, 1, 1);
   rw(0x60C2, 2, -3, 1);
@@ -257,6 +262,8 @@ void SimDrive::power_on() {
   set_int(0x6041, 0, co::statusword_for(state_));
   injected_fault_.reset();
   injected_fault_latched_ = false;  // an application reset clears the fault without an EMCY
+  tp_fn_ = 0;
+  tp_watch_ = false;
   reset_communication();
 }
 
@@ -268,6 +275,7 @@ void SimDrive::reset_communication() {
   syncs_ = 0;
   rx_latched_ = false;
   rx_do_.reset();
+  rx_tp_.reset();
   seg_upload_ = seg_download_ = false;
   storm_drop_left_ = 0;  // a rebooted communication layer forgets injected PDO/heartbeat gaps
   hb_gap_left_ = 0;
@@ -413,6 +421,7 @@ void SimDrive::on_rpdo(const CanFrame& f, std::uint16_t pdo) {
     else if (idx == 0x60FF || idx == 0x607A) rx_target_ = co::as_i32(v[k]);
     else if (idx == 0x6060) set_int(0x6060, 0, static_cast<std::int8_t>(v[k] & 0xFF));
     else if (idx == 0x60FE) rx_do_ = static_cast<std::uint32_t>(v[k] & 0xFFFFFFFF);
+    else if (idx == 0x60B8) rx_tp_ = static_cast<std::uint16_t>(v[k] & 0xFFFF);
     else if (s_.io.enabled && (idx == 0x6200 || idx == 0x6411))
       set_int(idx, m.entries[k].sub, v[k]);
   }
@@ -577,6 +586,12 @@ void SimDrive::apply_and_step() {
     set_int(0x60FE, 1, *rx_do_);
     rx_do_.reset();
   }
+  if (rx_tp_) {
+    set_int(0x60B8, 0, *rx_tp_);
+    rx_tp_.reset();
+  }
+  touch_probe_apply();
+  const double x_before_mm = plant_.position_mm();
   const double T = s_.period_s;
   const double decel_mm_s2 =
       static_cast<double>(read_int_or(0x6085, 0, 1000000) & 0xFFFFFFFF) / s_.counts_per_mm;
@@ -631,6 +646,7 @@ void SimDrive::apply_and_step() {
       plant_.step(0.0);  // velocity loop holds zero speed (brake)
       break;
   }
+  touch_probe_watch(x_before_mm, plant_.position_mm());
   if (state_ != co::Cia402State::kOperationEnabled || mode != 6) {
     // Homing only runs in operation enabled, mode 6: anything else interrupts it.
     if (home_stage_ != HomeStage::kNotStarted && home_stage_ != HomeStage::kAttained &&
@@ -638,6 +654,43 @@ void SimDrive::apply_and_step() {
       home_stage_ = HomeStage::kInterrupted;
     home_v_mm_s_ = 0.0;
   }
+}
+
+void SimDrive::touch_probe_apply() {
+  const auto fn = static_cast<std::uint16_t>(read_int_or(0x60B8, 0, 0) & 0xFFFF);
+  const std::uint16_t prev = tp_fn_;
+  tp_fn_ = fn;
+  if (find(0x60B9, 0) == nullptr) return;
+  if ((fn & co::kTouchProbe1Enable) == 0) {
+    set_int(0x60B9, 0, 0);  // touch probe 1 off: its status is cleared
+    tp_watch_ = false;
+    return;
+  }
+  auto st = static_cast<std::uint16_t>((read_int(0x60B9, 0) & 0xFFFF) | co::kTouchProbe1Enabled);
+  const bool positive = (fn & co::kTouchProbe1PositiveEdge) != 0;
+  const bool edge = positive && ((prev & co::kTouchProbe1Enable) == 0 ||
+                                 (prev & co::kTouchProbe1PositiveEdge) == 0);
+  if (!positive || edge) st = static_cast<std::uint16_t>(st & ~co::kTouchProbe1PositiveStored);
+  if (!positive) tp_watch_ = false;
+  if (edge) tp_watch_ = (fn & co::kTouchProbe1TriggerMask) == co::kTouchProbe1TriggerIndex;
+  set_int(0x60B9, 0, st);
+}
+
+void SimDrive::touch_probe_watch(double x0, double x1) {
+  const double pitch = s_.index_pitch_mm;
+  if (!tp_watch_ || !(pitch > 0.0) || s_.spindle || x0 == x1) return;
+  const double phase = s_.index_phase_mm;
+  // The first pulse past x0 in the direction of motion; crossed if the step reaches it.
+  const bool up = x1 > x0;
+  const double k = up ? std::floor((x0 - phase) / pitch) + 1.0 : std::ceil((x0 - phase) / pitch) - 1.0;
+  const double at = phase + k * pitch;
+  if (up ? at > x1 : at < x1) return;
+  const std::int64_t counts = std::llround(at * s_.counts_per_mm) - pos_zero_counts_;
+  set_int(0x60BA, 0, static_cast<std::int32_t>(static_cast<std::uint32_t>(counts & 0xFFFFFFFF)));
+  set_int(0x60B9, 0, (read_int(0x60B9, 0) & 0xFFFF) | co::kTouchProbe1PositiveStored);
+  ++tp_latches_;
+  tp_last_index_mm_ = at;
+  if ((tp_fn_ & co::kTouchProbe1Continuous) == 0) tp_watch_ = false;  // first event only
 }
 
 std::uint32_t SimDrive::inputs_at(double x) const {

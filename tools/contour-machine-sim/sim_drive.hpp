@@ -24,10 +24,25 @@
 // bits 10/12/13 as CiA 402 defines them for homing. A drive without homing support:
 // --missing-object NODE:0x6098 (the master's write of 0x6098 is then aborted 0x06020000).
 //
+// Touch probe 1 (0x60B8 function, 0x60B9 status, 0x60BA positive-edge position, PDO-mappable;
+// the master's encoder index latch for home.use_index): the axis' motor encoder has an index,
+// one pulse per SimDriveSetup::index_pitch_mm of true travel at index_phase_mm + k x pitch
+// (none while the pitch is 0). 0x60B8 is applied at SYNC with the RPDO (an SDO write at the next
+// SYNC): bit 0 on sets 0x60B9 bit 0, off clears 0x60B9; bit 4 (positive edge) going 0 -> 1, or
+// bit 0 going 0 -> 1 with bit 4 set, arms the latch and clears 0x60B9 bit 1; bit 4 off disarms
+// and clears bit 1. Armed with trigger source 01 (bits 2..3: the encoder's zero impulse), the
+// first pulse the plant crosses in a step (up: x0 < pulse <= x1; down: x1 <= pulse < x0; the
+// plant moves monotonically within a step, so that is where the crossing is) is latched at its
+// own position: 0x60BA = round(pulse x counts_per_mm) - the homing zero, i.e. quantised exactly
+// as 0x6064 would read there, and 0x60B9 bit 1 set; first event (bit 1 = 0) disarms, continuous
+// (bit 1 = 1) latches each pulse. Trigger source 00 (a touch probe input) has no input here:
+// it never latches. A drive without the objects: --no-touch-probe NODE.
+//
 // Quirks (SimQuirks, contour-machine-sim --missing-object/--pdos/--expedited-only/
-// --tpdo-sampling): drives that are not a complete CiA 301/402 drive. A missing 0x605A/0x6085
+// --tpdo-sampling/--no-touch-probe): drives that are not a complete CiA 301/402 drive. A missing 0x605A/0x6085
 // means the built-in quick stop (option 2, 1000000 counts/s^2).
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -111,6 +126,10 @@ struct SimDriveSetup {
   SimFaults faults;
   SimQuirks quirks;
   std::vector<InputSwitch> switches;  // 0x60FD, sampled with the TPDOs
+  // The motor encoder's index (touch probe 1, see the header comment): one pulse per
+  // index_pitch_mm of true travel (0: none) at index_phase_mm + k x pitch.
+  double index_pitch_mm = 0.0;
+  double index_phase_mm = 0.0;
   SimIoModule io;                     // io.enabled: a CiA 401 module, not a drive
 };
 
@@ -143,6 +162,17 @@ class SimDrive {
   // 0x60FD as last sampled; 0x60FE:01 as last written (RPDO2 at SYNC, or SDO).
   [[nodiscard]] std::uint32_t digital_inputs() const { return u32(0x60FD, 0); }
   [[nodiscard]] std::uint32_t digital_outputs() const { return u32(0x60FE, 1); }
+  // Touch probe 1: 0x60B8 as last applied, 0x60B9, 0x60BA as they are now; the pulses latched
+  // so far and the true position (mm) of the last one.
+  [[nodiscard]] std::uint16_t touch_probe_function() const { return tp_fn_; }
+  [[nodiscard]] std::uint16_t touch_probe_status() const {
+    return static_cast<std::uint16_t>(read_int(0x60B9, 0) & 0xFFFF);
+  }
+  [[nodiscard]] std::int32_t touch_probe_position_counts() const {
+    return static_cast<std::int32_t>(read_int(0x60BA, 0));
+  }
+  [[nodiscard]] long index_latches() const { return tp_latches_; }
+  [[nodiscard]] double last_index_mm() const { return tp_last_index_mm_; }
 
   // Re-armable fault injection (contour-machine-sim --storm, storm.hpp). Each call is one event
   // and may be repeated any time after the previous one; all act on SYNC (lockstep).
@@ -190,6 +220,8 @@ class SimDrive {
   void abort(std::uint16_t index, std::uint8_t sub, std::uint32_t code);
   void raise_fault(std::uint16_t code);
   void step_homing(std::uint16_t cw);  // CiA 402 homing mode 6, one period (apply_and_step)
+  void touch_probe_apply();  // 0x60B8 at SYNC: enable, arm edges (apply_and_step, before the step)
+  void touch_probe_watch(double x0_mm, double x1_mm);  // index pulses crossed by the step
   [[nodiscard]] std::uint32_t inputs_at(double x_mm) const;
   void home_here(double x_mm);
   void heartbeat();
@@ -219,6 +251,11 @@ class SimDrive {
   bool rx_latched_ = false;
   std::uint16_t rx_cw_ = 0;
   std::optional<std::uint32_t> rx_do_;  // 0x60FE:01 received in an RPDO, applied at SYNC
+  std::optional<std::uint16_t> rx_tp_;  // 0x60B8 received in an RPDO, applied at SYNC
+  std::uint16_t tp_fn_ = 0;     // 0x60B8 as applied at the last SYNC (its edges arm the latch)
+  bool tp_watch_ = false;       // armed on the encoder index
+  long tp_latches_ = 0;
+  double tp_last_index_mm_ = std::nan("");
   long syncs_ = 0;
   long motion_started_at_ = -1;  // SYNC count of the first non-zero target applied
   long sdo_dropped_ = 0;         // SDO requests ignored so far (SimFaults::drop_sdo_requests)
