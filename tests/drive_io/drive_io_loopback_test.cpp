@@ -21,6 +21,7 @@
 #include "config/config.hpp"
 #include "daemon/canopen_bus.hpp"
 #include "drivers/canopen/codec.hpp"
+#include "tests/drive_io/loopback_bus.hpp"
 #include "tools/contour-machine-sim/sim_drive.hpp"
 
 namespace contour {
@@ -32,48 +33,7 @@ using drivers::CanFrame;
 using drivers::CanStats;
 using drivers::SendResult;
 
-// The master's frames go to every drive at once; the drives' frames queue for the master.
-class Loopback final : public drivers::CanBus {
- public:
-  std::vector<std::unique_ptr<sim::SimDrive>> drives;
-  std::deque<CanFrame> to_master;
-  std::vector<CanFrame> from_master;
-  void add(sim::SimDriveSetup s) {
-    drives.push_back(std::make_unique<sim::SimDrive>(
-        std::move(s), [this](const CanFrame& f) { to_master.push_back(f); }));
-    drives.back()->power_on();
-  }
-  SendResult send(const CanFrame& f) noexcept override {
-    from_master.push_back(f);
-    for (auto& d : drives) d->on_frame(f);
-    return SendResult::kOk;
-  }
-  bool receive(CanFrame& f) noexcept override {
-    if (to_master.empty()) return false;
-    f = to_master.front();
-    to_master.pop_front();
-    return true;
-  }
-  bool wait_readable(std::int64_t) noexcept override { return !to_master.empty(); }
-  CanStats stats() const noexcept override { return {}; }
-  BusState bus_state() const noexcept override { return BusState::kErrorActive; }
-  void clear_bus_state() noexcept override {}
-  // The SDO requests (initiate download) the master sent to `node`, as (index, sub, value).
-  struct Write {
-    std::uint16_t index;
-    std::uint8_t sub;
-    std::uint32_t value;
-    bool operator==(const Write&) const = default;
-  };
-  [[nodiscard]] std::vector<Write> sdo_writes(std::uint8_t node) const {
-    std::vector<Write> w;
-    for (const auto& f : from_master) {
-      if (f.id != co::kCobSdoRx + node || f.dlc != 8 || (f.data[0] & 0xE0) != 0x20) continue;
-      w.push_back({co::get_u16(&f.data[1]), f.data[3], co::get_u32(&f.data[4])});
-    }
-    return w;
-  }
-};
+using Loopback = test::SimLoopback;  // tests/drive_io/loopback_bus.hpp
 
 constexpr const char* kMachine = R"(loop: {period_us: 1000, tpdo_deadline_us: 800}
 safety: {missed_tpdo_streak: 3, ferror_mm: 5.0, min_ferror_mm: 1.0}

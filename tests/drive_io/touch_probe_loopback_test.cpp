@@ -30,6 +30,7 @@
 #include "daemon/canopen_bus.hpp"
 #include "drivers/canopen/codec.hpp"
 #include "tests/support/alloc_counter.hpp"
+#include "tests/drive_io/loopback_bus.hpp"
 #include "tools/contour-machine-sim/sim_drive.hpp"
 
 namespace contour {
@@ -41,51 +42,7 @@ using drivers::CanFrame;
 using drivers::CanStats;
 using drivers::SendResult;
 
-class Loopback final : public drivers::CanBus {
- public:
-  std::vector<std::unique_ptr<sim::SimDrive>> drives;
-  std::deque<CanFrame> to_master;
-  std::vector<CanFrame> from_master;
-  void add(sim::SimDriveSetup s) {
-    drives.push_back(std::make_unique<sim::SimDrive>(
-        std::move(s), [this](const CanFrame& f) { to_master.push_back(f); }));
-    drives.back()->power_on();
-  }
-  int drop_rpdo1 = 0;  // RPDO1 frames to node 1 lost on the way (the drive keeps the last)
-  SendResult send(const CanFrame& f) noexcept override {
-    from_master.push_back(f);
-    if (f.id == co::kCobRpdo[0] + 1 && drop_rpdo1 > 0) {
-      --drop_rpdo1;
-      return SendResult::kOk;
-    }
-    for (auto& d : drives) d->on_frame(f);
-    return SendResult::kOk;
-  }
-  bool receive(CanFrame& f) noexcept override {
-    if (to_master.empty()) return false;
-    f = to_master.front();
-    to_master.pop_front();
-    return true;
-  }
-  bool wait_readable(std::int64_t) noexcept override { return !to_master.empty(); }
-  CanStats stats() const noexcept override { return {}; }
-  BusState bus_state() const noexcept override { return BusState::kErrorActive; }
-  void clear_bus_state() noexcept override {}
-  struct Write {
-    std::uint16_t index;
-    std::uint8_t sub;
-    std::uint32_t value;
-    bool operator==(const Write&) const = default;
-  };
-  [[nodiscard]] std::vector<Write> sdo_writes(std::uint8_t node) const {
-    std::vector<Write> w;
-    for (const auto& f : from_master) {
-      if (f.id != co::kCobSdoRx + node || f.dlc != 8 || (f.data[0] & 0xE0) != 0x20) continue;
-      w.push_back({co::get_u16(&f.data[1]), f.data[3], co::get_u32(&f.data[4])});
-    }
-    return w;
-  }
-};
+using Loopback = test::SimLoopback;  // tests/drive_io/loopback_bus.hpp
 
 // X homed on its switch (0x60FD in TPDO2), with or without use_index (%INDEX%); Y not homed.
 constexpr const char* kMachine = R"(loop: {period_us: 1000, tpdo_deadline_us: 800}
