@@ -31,19 +31,24 @@
 
 namespace contour::test {
 
-// The plant position of `node` in contour-machine-sim's JSON summary (the last line it prints
-// at exit: nodes[].position_mm); NaN if there is none.
-inline double sim_summary_position_mm(const std::string& out, int node) {
+// `node`'s entry in contour-machine-sim's JSON summary (the last line it prints at exit:
+// nodes[]); an empty object if there is none.
+inline nlohmann::json sim_summary_node(const std::string& out, int node) {
   const auto end = out.find_last_not_of('\n');
-  if (end == std::string::npos) return std::nan("");
+  if (end == std::string::npos) return nlohmann::json::object();
   const auto begin = out.find_last_of('\n', end);
   const auto j = nlohmann::json::parse(out.substr(begin == std::string::npos ? 0 : begin + 1, end - begin),
                                        nullptr, false);
-  if (!j.is_object() || !j.contains("nodes")) return std::nan("");
-  for (const auto& n : j["nodes"]) {
-    if (n["node_id"] == node) return n["position_mm"].get<double>();
-  }
-  return std::nan("");
+  if (j.is_object() && j.contains("nodes"))
+    for (const auto& n : j["nodes"])
+      if (n["node_id"] == node) return n;
+  return nlohmann::json::object();
+}
+
+// The plant position of `node` in that summary (nodes[].position_mm); NaN if there is none.
+inline double sim_summary_position_mm(const std::string& out, int node) {
+  const auto n = sim_summary_node(out, node);
+  return n.contains("position_mm") ? n["position_mm"].get<double>() : std::nan("");
 }
 
 inline const char* kIface = "vcan0";

@@ -20,6 +20,7 @@
 #include <string>
 
 #include "tests/hil/canopen_hil_support.hpp"
+#include "tests/hil/homing_hil_support.hpp"
 #include "tests/support/daemon_process.hpp"
 #include "tests/support/run_cmd.hpp"
 
@@ -34,21 +35,10 @@ const std::string kCtl = std::string(CONTOUR_BINARY_DIR) + "/tools/contourctl";
 // reaches it in 1 s at 20 mm/s; home where it opens moving up at 1 mm/s); home_offset_mm -19.5
 // names the switch point, so machine coordinates are the true ones.
 std::string hil_drive_homing_config(const std::string& tag) {
-  std::string y = contour::test::slurp(kSrc + "/config/hil.yaml");
-  auto sub = [&y](const std::string& from, const std::string& to) {
-    const auto at = y.find(from);
-    EXPECT_NE(at, std::string::npos) << from;
-    if (at != std::string::npos) y.replace(at, from.size(), to);
-  };
-  sub("machine:\n", "machine:\n  allow_unhomed: true  # Y and Z are not homed here\n");
-  sub("min_mm: -200, max_mm: 200, max_velocity_mm_min: 10000}",
-      "min_mm: -20, max_mm: 200, max_velocity_mm_min: 10000,\n"
-      "       home: {method: drive, drive_method: 21, search_vel_mm_min: 1200, latch_vel_mm_min: 60,\n"
-      "              accel_mm_s2: 1000, home_offset_mm: -19.5, home_position_mm: -10}}");
-  const auto path = std::filesystem::temp_directory_path() /
-                    ("contour_hil_drive_homing_" + tag + "_" + std::to_string(::getpid()) + ".yaml");
-  std::ofstream(path) << y;
-  return path.string();
+  return contour::test::hil_homing_config(
+      "drive_" + tag,
+      "{method: drive, drive_method: 21, search_vel_mm_min: 1200, latch_vel_mm_min: 60,\n"
+      "              accel_mm_s2: 1000, home_offset_mm: -19.5, home_position_mm: -10}");
 }
 
 

@@ -20,6 +20,7 @@
 #include <string>
 
 #include "tests/hil/canopen_hil_support.hpp"
+#include "tests/hil/homing_hil_support.hpp"
 #include "tests/support/daemon_process.hpp"
 #include "tests/support/run_cmd.hpp"
 
@@ -29,42 +30,14 @@ using nlohmann::json;
 const std::string kSrc = CONTOUR_SOURCE_DIR;
 const std::string kCtl = std::string(CONTOUR_BINARY_DIR) + "/tools/contourctl";
 
-// config/hil.yaml with X's travel -20..200 mm and its home: section `home` (Y and Z unhomed).
+// config/hil.yaml with X's home: section `home` (homing_hil_support.hpp). A switch-homed axis adds
+// its TPDO2 (0x60FD) every cycle: 86 % worst case on hil.yaml's bus, over its 80 % ceiling.
 std::string hil_homing_config(const std::string& tag, const std::string& home) {
-  std::string y = contour::test::slurp(kSrc + "/config/hil.yaml");
-  auto sub = [&y](const std::string& from, const std::string& to) {
-    const auto at = y.find(from);
-    EXPECT_NE(at, std::string::npos) << from;
-    if (at != std::string::npos) y.replace(at, from.size(), to);
-  };
-  sub("machine:\n", "machine:\n  allow_unhomed: true  # Y and Z are not homed here\n");
-  sub("min_mm: -200, max_mm: 200, max_velocity_mm_min: 10000}",
-      "min_mm: -20, max_mm: 200, max_velocity_mm_min: 10000,\n       home: " + home + "}");
-  // A switch-homed axis adds its TPDO2 (0x60FD) every cycle: 86 % worst case on hil.yaml's
-  // 1 Mbit/s bus, over its 80 % ceiling (start-up refuses it, naming the figures). vcan has no
-  // bit time; the test raises the ceiling rather than the bit rate the simulator expects.
-  sub("load_ceiling_percent: 80", "load_ceiling_percent: 90");
-  const auto path = std::filesystem::temp_directory_path() /
-                    ("contour_hil_homing_" + tag + "_" + std::to_string(::getpid()) + ".yaml");
-  std::ofstream(path) << y;
-  return path.string();
+  return contour::test::hil_homing_config(tag, home, 90);
 }
 
 
-// X at rest at `target_mm`: two samples at least 300 cycles apart, 1 um from each other and 2 um
-// from the target (the final move is a trapezoid that rings some 25 um past its end and settles
-// within ~0.3 s: being within 2 um once can be mid-swing).
-json wait_at_rest(contour::test::DaemonProcess& d, double target_mm) {
-  for (int k = 0; k < 60; ++k) {
-    const json s1 = d.ok({{"cmd", "status"}});
-    const auto c1 = s1["cycle"].get<std::uint64_t>();
-    const json s2 = d.wait_status([&](const json& s) { return s["cycle"].get<std::uint64_t>() >= c1 + 300; });
-    const double x1 = s1["act_mm"][0].get<double>(), x2 = s2["act_mm"][0].get<double>();
-    if (std::abs(x2 - x1) < 0.001 && std::abs(x2 - target_mm) < 0.002) return s2;
-  }
-  ADD_FAILURE() << "X never came to rest at " << target_mm << " mm\n" << d.log();
-  return d.ok({{"cmd", "status"}});
-}
+using contour::test::wait_x_at_rest;
 
 }  // namespace
 
@@ -89,7 +62,7 @@ TEST(HomingHil, SwitchOverVcanLatchesTheReleaseEdgeOnTheTruePosition) {
     EXPECT_TRUE(st["homing"]["failure"].is_null()) << st.dump();
     EXPECT_EQ(st["state"], "READY") << st.dump();
     EXPECT_NEAR(st["ref_mm"][0].get<double>(), -10.0, 1e-9);
-    st = wait_at_rest(d, -10.0);
+    st = wait_x_at_rest(d, -10.0);
     act_x = st["act_mm"][0].get<double>();
     EXPECT_EQ(d.log().find("FAULT"), std::string::npos) << d.log();
     EXPECT_NE(d.log().find("axis 0 homed"), std::string::npos) << d.log();

@@ -25,6 +25,7 @@
 #include <string>
 
 #include "tests/hil/canopen_hil_support.hpp"
+#include "tests/hil/homing_hil_support.hpp"
 #include "tests/support/daemon_process.hpp"
 #include "tests/support/run_cmd.hpp"
 
@@ -37,54 +38,21 @@ constexpr double kPulseMm = -17.99977;   // the first index pulse above the swit
 constexpr double kHomeOffsetMm = -19.5;  // what that pulse reads afterwards
 constexpr double kCountMm = 1.0 / 2000.0;
 
-// config/hil.yaml with X's travel -20..200 mm and homed by switch + index.
+// config/hil.yaml with X homed by switch + index (homing_hil_support.hpp). X's TPDO2 (0x60FD) and
+// TPDO3 (touch probe) and its RPDO1 grown to 8 bytes: 99.8 % worst case on hil.yaml's 1 Mbit/s
+// bus (vcan has no bit time; a real bus would need fewer nodes or a longer period): the ceiling
+// goes to 100 %.
 std::string index_homing_config(const std::string& tag) {
-  std::string y = contour::test::slurp(kSrc + "/config/hil.yaml");
-  auto sub = [&y](const std::string& from, const std::string& to) {
-    const auto at = y.find(from);
-    EXPECT_NE(at, std::string::npos) << from;
-    if (at != std::string::npos) y.replace(at, from.size(), to);
-  };
-  sub("machine:\n", "machine:\n  allow_unhomed: true  # Y and Z are not homed here\n");
-  sub("min_mm: -200, max_mm: 200, max_velocity_mm_min: 10000}",
-      "min_mm: -20, max_mm: 200, max_velocity_mm_min: 10000,\n       home: {method: switch, "
-      "search_vel_mm_min: -1200, latch_vel_mm_min: 600, home_offset_mm: -19.5, "
-      "home_position_mm: -10, use_index: true}}");
-  // X's TPDO2 (0x60FD) and TPDO3 (touch probe) and its RPDO1 grown to 8 bytes: 99.8 % worst case
-  // on hil.yaml's 1 Mbit/s bus (vcan has no bit time; a real bus would need fewer nodes or a
-  // longer period). The test raises the ceiling, as homing_hil_test does for TPDO2.
-  sub("load_ceiling_percent: 80", "load_ceiling_percent: 100");
-  const auto path = std::filesystem::temp_directory_path() /
-                    ("contour_hil_index_homing_" + tag + "_" + std::to_string(::getpid()) + ".yaml");
-  std::ofstream(path) << y;
-  return path.string();
+  return contour::test::hil_homing_config(
+      "index_" + tag,
+      "{method: switch, search_vel_mm_min: -1200, latch_vel_mm_min: 600, home_offset_mm: -19.5, "
+      "home_position_mm: -10, use_index: true}",
+      100);
 }
 
-// A node's entry of contour-machine-sim's JSON summary (its last line).
-json sim_summary_node(const std::string& out, int node) {
-  const auto end = out.find_last_not_of('\n');
-  const auto begin = end == std::string::npos ? std::string::npos : out.find_last_of('\n', end);
-  const std::string line =
-      end == std::string::npos ? "" : out.substr(begin == std::string::npos ? 0 : begin + 1, end - begin);
-  const json j = json::parse(line, nullptr, false);
-  if (j.is_object() && j.contains("nodes"))
-    for (const auto& n : j["nodes"])
-      if (n["node_id"] == node) return n;
-  return json::object();
-}
+using contour::test::sim_summary_node;
 
-// X at rest at `target_mm` (as homing_hil_test: two samples 300 cycles apart within 1 um).
-json wait_at_rest(contour::test::DaemonProcess& d, double target_mm) {
-  for (int k = 0; k < 60; ++k) {
-    const json s1 = d.ok({{"cmd", "status"}});
-    const auto c1 = s1["cycle"].get<std::uint64_t>();
-    const json s2 = d.wait_status([&](const json& s) { return s["cycle"].get<std::uint64_t>() >= c1 + 300; });
-    const double x1 = s1["act_mm"][0].get<double>(), x2 = s2["act_mm"][0].get<double>();
-    if (std::abs(x2 - x1) < 0.001 && std::abs(x2 - target_mm) < 0.002) return s2;
-  }
-  ADD_FAILURE() << "X never came to rest at " << target_mm << " mm\n" << d.log();
-  return d.ok({{"cmd", "status"}});
-}
+using contour::test::wait_x_at_rest;
 
 }  // namespace
 
@@ -103,7 +71,7 @@ TEST(IndexHomingHil, SwitchAndIndexOverVcanHomeOnTheIndexPulseToACount) {
     EXPECT_TRUE(st["homed"]["X"].get<bool>()) << st.dump();
     EXPECT_TRUE(st["homing"]["failure"].is_null()) << st.dump();
     EXPECT_EQ(st["state"], "READY") << st.dump();
-    st = wait_at_rest(d, -10.0);
+    st = wait_x_at_rest(d, -10.0);
     act_x = st["act_mm"][0].get<double>();
     EXPECT_EQ(d.log().find("FAULT"), std::string::npos) << d.log();
     EXPECT_NE(d.log().find("axis 0 homed"), std::string::npos) << d.log();
