@@ -57,31 +57,15 @@ plc:
     - {name: flow, type: INT, cia401: {node: 5, analog_input: 2}}
 )";
 
-struct Scratch {
-  Scratch() {
-    dir = std::filesystem::temp_directory_path() /
-          ("cia401_lb_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    std::filesystem::create_directories(dir);
-    std::ofstream(dir / "io.st") << "PROGRAM io\n  clamp := part;\nEND_PROGRAM\n";
-    std::ofstream(dir / "c.yaml") << kConfig;
+struct Scratch : test::ScratchDir {
+  Scratch() : ScratchDir("cia401_lb") {
+    write("io.st", "PROGRAM io\n  clamp := part;\nEND_PROGRAM\n");
+    write("c.yaml", kConfig);
   }
-  ~Scratch() { std::filesystem::remove_all(dir); }
-  config::Config load() { return config::load_config_file((dir / "c.yaml").string()); }
-  std::filesystem::path dir;
-  static inline int counter = 0;
+  config::Config load() const { return config::load_config_file((dir / "c.yaml").string()); }
 };
 
-sim::SimDriveSetup drive_x() {
-  sim::SimDriveSetup s;
-  s.node_id = 1;
-  s.name = "X";
-  s.counts_per_mm = 2000.0;
-  s.plant.gain_per_s = 120.0;
-  s.plant.tau_s = 0.03;
-  s.plant.period_s = 0.001;
-  s.period_s = 0.001;
-  return s;
-}
+sim::SimDriveSetup drive_x() { return test::sim_drive_setup(1, "X"); }
 
 sim::SimDriveSetup module5() {
   sim::SimDriveSetup s;
@@ -93,26 +77,11 @@ sim::SimDriveSetup module5() {
   return s;
 }
 
-struct Bench {
-  explicit Bench(const config::Config& c, sim::SimDriveSetup m = module5()) : cfg(c) {
+struct Bench : test::LoopbackBench {
+  explicit Bench(const config::Config& c, sim::SimDriveSetup m = module5()) : LoopbackBench(c) {
     can.add(drive_x());
     can.add(std::move(m));
   }
-  void start() {
-    bus = std::make_unique<daemon::CanopenBus>(cfg, can, daemon::CanopenBus::Log{});
-    bus->set_event_thread(false);
-    bus->start();
-  }
-  daemon::BusFeedback cycle(const daemon::AxisCommands& cmd) {
-    daemon::BusFeedback fb;
-    bus->begin_cycle();
-    bus->read(fb);
-    bus->write(cmd);
-    return fb;
-  }
-  config::Config cfg;
-  Loopback can;
-  std::unique_ptr<daemon::CanopenBus> bus;
 };
 
 using W = Loopback::Write;

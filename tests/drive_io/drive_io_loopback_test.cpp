@@ -61,32 +61,14 @@ constexpr const char* kPlc = R"(plc:
     - {name: x_valve, cia402: {axis: X, output: 18}}
 )";
 
-struct Scratch {
-  Scratch() {
-    dir = std::filesystem::temp_directory_path() /
-          ("drive_io_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    std::filesystem::create_directories(dir);
-    std::ofstream(dir / "io.st")
-        << "PROGRAM io\n  x_lamp := x_pos_limit;\n  x_valve := x_cam;\nEND_PROGRAM\n";
+struct Scratch : test::ScratchDir {
+  Scratch() : ScratchDir("drive_io") {
+    write("io.st", "PROGRAM io\n  x_lamp := x_pos_limit;\n  x_valve := x_cam;\nEND_PROGRAM\n");
   }
-  ~Scratch() { std::filesystem::remove_all(dir); }
-  config::Config load(const std::string& text) {
-    std::ofstream(dir / "c.yaml") << text;
-    return config::load_config_file((dir / "c.yaml").string());
-  }
-  std::filesystem::path dir;
-  static inline int counter = 0;
 };
 
 sim::SimDriveSetup drive(std::uint8_t node, const std::string& name) {
-  sim::SimDriveSetup s;
-  s.node_id = node;
-  s.name = name;
-  s.counts_per_mm = 2000.0;
-  s.plant.gain_per_s = 120.0;
-  s.plant.tau_s = 0.03;
-  s.plant.period_s = 0.001;
-  s.period_s = 0.001;
+  sim::SimDriveSetup s = test::sim_drive_setup(node, name);
   // As contour-machine-sim's defaults, plus two cams: bit 16 on right away (above -1 mm), bit 17
   // once the axis passes +1 mm.
   s.switches = {
@@ -94,26 +76,11 @@ sim::SimDriveSetup drive(std::uint8_t node, const std::string& name) {
   return s;
 }
 
-struct Bench {
-  explicit Bench(const config::Config& c) : cfg(c) {
+struct Bench : test::LoopbackBench {
+  explicit Bench(const config::Config& c) : LoopbackBench(c) {
     can.add(drive(1, "X"));
     can.add(drive(2, "Y"));
   }
-  void start() {
-    bus = std::make_unique<daemon::CanopenBus>(cfg, can, daemon::CanopenBus::Log{});
-    bus->set_event_thread(false);
-    bus->start();
-  }
-  daemon::BusFeedback cycle(const daemon::AxisCommands& cmd) {
-    daemon::BusFeedback fb;
-    bus->begin_cycle();
-    bus->read(fb);
-    bus->write(cmd);
-    return fb;
-  }
-  config::Config cfg;
-  Loopback can;
-  std::unique_ptr<daemon::CanopenBus> bus;
 };
 
 TEST(DriveIoLoopback, NodesWithoutBindingsKeepTheirConfigurationBitForBit) {

@@ -3,12 +3,19 @@
 // drive (contour-machine-sim's SimDrive) at once, the drives' frames queue for the master. Records
 // what the master sent (sdo_writes() lists its SDO downloads per node) and can lose RPDO1 frames
 // to node 1 on the way (drop_rpdo1: the drive keeps the last one it got).
+#include <unistd.h>
+
 #include <cstdint>
 #include <deque>
+#include <filesystem>
+#include <fstream>
 #include <memory>
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "config/config.hpp"
+#include "daemon/canopen_bus.hpp"
 #include "drivers/can/can_bus.hpp"
 #include "drivers/canopen/codec.hpp"
 #include "tools/contour-machine-sim/sim_drive.hpp"
@@ -63,6 +70,63 @@ class SimLoopback final : public drivers::CanBus {
     }
     return w;
   }
+};
+
+// A simulated CiA 402 drive with the tests' Table-1-like plant (120 1/s, 30 ms) at 1 ms;
+// contour-machine-sim's default switches unless the test sets its own.
+inline sim::SimDriveSetup sim_drive_setup(std::uint8_t node, const std::string& name,
+                                          double counts_per_mm = 2000.0) {
+  sim::SimDriveSetup s;
+  s.node_id = node;
+  s.name = name;
+  s.counts_per_mm = counts_per_mm;
+  s.plant.gain_per_s = 120.0;
+  s.plant.tau_s = 0.03;
+  s.plant.period_s = 0.001;
+  s.period_s = 0.001;
+  return s;
+}
+
+// The real daemon::CanopenBus over a SimLoopback (no event thread: the test takes the events),
+// started by start() once the test has added its nodes; cycle() is one begin/read/write.
+struct LoopbackBench {
+  explicit LoopbackBench(const config::Config& c) : cfg(c) {}
+  void start() {
+    bus = std::make_unique<daemon::CanopenBus>(cfg, can, daemon::CanopenBus::Log{});
+    bus->set_event_thread(false);
+    bus->start();
+  }
+  daemon::BusFeedback cycle(const daemon::AxisCommands& cmd) {
+    daemon::BusFeedback fb;
+    bus->begin_cycle();
+    bus->read(fb);
+    bus->write(cmd);
+    return fb;
+  }
+  config::Config cfg;
+  SimLoopback can;
+  std::unique_ptr<daemon::CanopenBus> bus;
+};
+
+// A directory of this test's own (<tmp>/<prefix>_<pid>_<n>), removed at the end; load() writes a
+// config text to c.yaml in it and loads it (relative program files resolve there).
+struct ScratchDir {
+  explicit ScratchDir(const std::string& prefix) {
+    dir = std::filesystem::temp_directory_path() /
+          (prefix + "_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+    std::filesystem::create_directories(dir);
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+  }
+  void write(const std::string& name, const std::string& text) const { std::ofstream(dir / name) << text; }
+  config::Config load(const std::string& text) const {
+    write("c.yaml", text);
+    return config::load_config_file((dir / "c.yaml").string());
+  }
+  std::filesystem::path dir;
+  static inline int counter = 0;
 };
 
 }  // namespace contour::test

@@ -77,56 +77,26 @@ std::string machine(bool use_index, double cpm = 2000.0, const std::string& extr
   return y + extra;
 }
 
-struct Scratch {
-  Scratch() {
-    dir = std::filesystem::temp_directory_path() /
-          ("touch_probe_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    std::filesystem::create_directories(dir);
-  }
-  ~Scratch() { std::filesystem::remove_all(dir); }
-  config::Config load(const std::string& text) {
-    std::ofstream(dir / "c.yaml") << text;
-    return config::load_config_file((dir / "c.yaml").string());
-  }
-  std::filesystem::path dir;
-  static inline int counter = 0;
+struct Scratch : test::ScratchDir {
+  Scratch() : ScratchDir("touch_probe") {}
 };
 
 constexpr double kPitchMm = 5.0;
 constexpr double kPhaseMm = 0.3;
 
 sim::SimDriveSetup drive(std::uint8_t node, const std::string& name, double cpm = 2000.0) {
-  sim::SimDriveSetup s;
-  s.node_id = node;
-  s.name = name;
-  s.counts_per_mm = cpm;
-  s.plant.gain_per_s = 120.0;
-  s.plant.tau_s = 0.03;
-  s.plant.period_s = 0.001;
-  s.period_s = 0.001;
+  sim::SimDriveSetup s = test::sim_drive_setup(node, name, cpm);
   s.switches = {{0, -202.0, false}, {1, 202.0, true}, {2, -199.5, false}};
   s.index_pitch_mm = kPitchMm;
   s.index_phase_mm = kPhaseMm;
   return s;
 }
 
-struct Bench {
+struct Bench : test::LoopbackBench {
   explicit Bench(const config::Config& c) : Bench(c, drive(1, "X")) {}
-  Bench(const config::Config& c, sim::SimDriveSetup x) : cfg(c) {
+  Bench(const config::Config& c, sim::SimDriveSetup x) : LoopbackBench(c) {
     can.add(std::move(x));
     can.add(drive(2, "Y"));
-  }
-  void start() {
-    bus = std::make_unique<daemon::CanopenBus>(cfg, can, daemon::CanopenBus::Log{});
-    bus->set_event_thread(false);
-    bus->start();
-  }
-  daemon::BusFeedback cycle(const daemon::AxisCommands& cmd) {
-    daemon::BusFeedback fb;
-    bus->begin_cycle();
-    bus->read(fb);
-    bus->write(cmd);
-    return fb;
   }
   // Enabled, X at rest.
   daemon::BusFeedback enable(daemon::AxisCommands& cmd) {
@@ -136,9 +106,6 @@ struct Bench {
     EXPECT_TRUE(fb.axis[0].enabled);
     return fb;
   }
-  config::Config cfg;
-  Loopback can;
-  std::unique_ptr<daemon::CanopenBus> bus;
 };
 
 using W = Loopback::Write;
