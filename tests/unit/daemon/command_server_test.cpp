@@ -582,6 +582,13 @@ TEST(CommandServerLimits, AWaitingHandlerGivesWayToAnotherClientsEstop) {
   const int b = connect_to(o.path);
   ASSERT_GE(a, 0);
   ASSERT_GE(b, 0);
+  // Both accepted before the wait starts: a connection still waiting in the listen backlog counts
+  // as a possible E-stop and ends a wait at once (seen under load in the ci-o3 run: b not yet
+  // accepted when "slow" began, so the wait gave way before any estop was sent).
+  for (const int fd : {a, b}) {
+    send_all(fd, R"({"id":0,"cmd":"status"})" "\n");
+    ASSERT_TRUE(json::parse(read_line(fd), nullptr, false).is_object());
+  }
   send_all(a, R"({"id":1,"cmd":"slow"})" "\n");
   for (int i = 0; i < 5000 && !in_wait; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   ASSERT_TRUE(in_wait.load());
