@@ -31,9 +31,13 @@ try {
   h.check(theirs.ok === false && theirs.error, `contourd refuses kp -1 (${theirs.error})`);
   await page.click('button[data-view=tuning]');
   await page.waitForSelector('#gains-table input[data-gain=kp]', { timeout: 10000 });
-  await page.$eval('#gains-table input[data-gain=kp]', (e) => { e.value = '-1, 0.6, 0.6'; });
-  await page.focus('#gains-table input[data-gain=kp]');
-  await page.keyboard.press('Enter');
+  // Typed and entered in one step: the view's own gains refresh may replace the table between two
+  // puppeteer calls (seen under load: the fresh input's 0.6 was entered, "kp set").
+  await page.$eval('#gains-table input[data-gain=kp]', (e) => {
+    e.focus();
+    e.value = '-1, 0.6, 0.6';
+    e.dispatchEvent(new KeyboardEvent('keydown', { key: 'Enter', bubbles: true }));
+  });
   await page.waitForFunction(() => document.querySelector('#gains-msg').textContent.startsWith('refused'), { timeout: 10000 })
     .catch(() => {});
   const shown = await page.$eval('#gains-msg', (e) => e.textContent);

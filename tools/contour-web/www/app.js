@@ -324,7 +324,12 @@ $('#mdi-input').addEventListener('keydown', (ev) => { if (ev.key === 'Enter') $(
 
 // --- gains ----------------------------------------------------------------------------------------
 async function loadGains() {
-  try { renderGains(await rpc.call('gains')); } catch (e) { $('#gains-msg').textContent = `gains: ${e.message}`; }
+  try {
+    const g = await rpc.call('gains');
+    // A refresh never takes the value an operator is typing out of the field.
+    if (document.activeElement && document.activeElement.closest('#gains-table')) return;
+    renderGains(g);
+  } catch (e) { $('#gains-msg').textContent = `gains: ${e.message}`; }
 }
 function renderGains(g) {
   const rows = [];
