@@ -288,8 +288,9 @@ SensitivityPeaks sensitivity_peaks(const StateSpace& plant, const StateSpace& ct
     const CMat si = (CMat::Identity(m, m) - k * g).inverse();
     const CMat so = (CMat::Identity(n, n) - g * k).inverse();
     const CMat to = CMat::Identity(n, n) - so;
+    // si, so and to are square: no QR preconditioner needed (and a third of the compile time).
     auto smax = [](const CMat& x) {
-      return Eigen::JacobiSVD<CMat>(x).singularValues()(0);
+      return Eigen::JacobiSVD<CMat, Eigen::NoQRPreconditioner>(x).singularValues()(0);
     };
     p.input_s = std::max(p.input_s, smax(si));
     p.output_s = std::max(p.output_s, smax(so));
