@@ -23,26 +23,6 @@ void ChatterMeter::reset(int axes) noexcept {
   steps_ = 0;
 }
 
-void ChatterMeter::add(const std::array<double, kChatterMaxAxes>& v) noexcept {
-  bool finite = true;
-  for (int i = 0; i < axes_; ++i) finite = finite && std::isfinite(v[static_cast<std::size_t>(i)]);
-  if (!finite) {
-    have_prev_ = false;
-    return;
-  }
-  if (have_prev_) {
-    for (int i = 0; i < axes_; ++i) {
-      const auto a = static_cast<std::size_t>(i);
-      const double d = v[a] - prev_[a];
-      sum_sq_[a] += d * d;
-      max_[a] = std::max(max_[a], std::abs(d));
-    }
-    ++steps_;
-  }
-  prev_ = v;
-  have_prev_ = true;
-}
-
 ChatterFigure ChatterMeter::figure() const noexcept {
   ChatterFigure f;
   f.axes = axes_;

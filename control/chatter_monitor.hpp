@@ -14,7 +14,9 @@
 // Units: mm/s for velocities and their changes, s for times, clamped cycles per second.
 // RT: ChatterMeter::add and ChatterMonitor::update are noexcept, allocation-free, O(axes)
 // (fixed arrays; the window is kBlocks blocks of whole cycles). Budget: < 0.1 us per cycle.
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -52,6 +54,27 @@ class ChatterMeter {
   std::array<double, kChatterMaxAxes> max_{};
   std::int64_t steps_ = 0;
 };
+
+// Inline: the daemon adds one sample per cycle (issue 15: the cycle's cost).
+inline void ChatterMeter::add(const std::array<double, kChatterMaxAxes>& v) noexcept {
+  bool finite = true;
+  for (int i = 0; i < axes_; ++i) finite = finite && std::isfinite(v[static_cast<std::size_t>(i)]);
+  if (!finite) {
+    have_prev_ = false;
+    return;
+  }
+  if (have_prev_) {
+    for (int i = 0; i < axes_; ++i) {
+      const auto a = static_cast<std::size_t>(i);
+      const double d = v[a] - prev_[a];
+      sum_sq_[a] += d * d;
+      max_[a] = std::max(max_[a], std::abs(d));
+    }
+    ++steps_;
+  }
+  prev_ = v;
+  have_prev_ = true;
+}
 
 // Detector parameters. Defaults (control/CHATTER.md has the measured figures behind them):
 // through the daemon on Table 2 with the default derivative filter a 0.1 s window peaks at

@@ -1307,13 +1307,18 @@ void ServoLoop::publish() noexcept {
   pub_.recording = recording_;
   pub_.drives_enabled = all_axes_enabled();
   pub_.accel_clamps = accel_clamps_;
-  {
+  // The watchdog's window and level change only while it is armed; once more in the cycle after
+  // it disarms (its reset: an empty window, level OK), then they stand (issue 15: the cycle's cost).
+  if (chatter_armed_ || chatter_published_armed_) {
     std::uint8_t lvl = 0;
     pub_.chatter_window_sums = chatter_mon_.window_sums();
     for (int i = 0; i < axes_; ++i) {
       lvl = std::max(lvl, static_cast<std::uint8_t>(chatter_mon_.level(i)));
     }
     pub_.chatter_level = lvl;
+    chatter_published_armed_ = chatter_armed_;
+  }
+  {
     pub_.chatter_job = job_chatter_id_;
     pub_.job_chatter_meter = job_chatter_;
   }

@@ -462,6 +462,7 @@ class ServoLoop {
   control::ChatterMonitor chatter_mon_;
   bool chatter_enabled_ = true;
   bool chatter_armed_ = false;      // the watchdog has seen servo cycles since its last reset
+  bool chatter_published_armed_ = true;  // publish() copied an armed watchdog last time (or never ran)
   control::ChatterMeter job_chatter_;
   std::uint64_t job_chatter_id_ = 0;
   std::array<double, kMaxAxes> v_est_{};  // measured velocity, or the drive-model estimate when stale
