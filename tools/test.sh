@@ -36,13 +36,19 @@ note "build ($preset) took $(( $(date +%s) - start )) s"
 
 status=0
 # run_step STEP BUILD_DIR COMMAND...: runs a ctest command (maybe under with-vcan); on failure
-# records the failed tests' names (ctest's LastTestsFailed.log), or that the run itself failed.
+# records the failed tests' names (ctest's LastTestsFailed.log), or that the run itself failed,
+# and keeps what ctest printed of each failed test (--output-on-failure) for the summary.
+failure_logs=()
 run_step() {
   local step=$1 dir=$2; shift 2
-  local failed="$dir/Testing/Temporary/LastTestsFailed.log" rc=0 t
+  local failed="$dir/Testing/Temporary/LastTestsFailed.log" rc=0 t log
   t=$(date +%s)
+  log=$(mktemp "${TMPDIR:-/tmp}/contour-test-step.XXXXXX")
   rm -f "$failed"
-  "$@" || rc=$?
+  set +e
+  "$@" 2>&1 | tee "$log"
+  rc=${PIPESTATUS[0]}
+  set -e
   if [ "$rc" != 0 ]; then
     status=1
     if [ -s "$failed" ]; then
@@ -50,7 +56,14 @@ run_step() {
     else
       note "FAILED in $step: exit $rc (no failed-test list: the run itself failed or was killed)"
     fi
+    # Each failed test's result line and the output ctest printed after it (the last 60 lines).
+    local excerpt="$log.failed"
+    awk '/Test +#[0-9]+: .*\*\*\*/ && !/Skipped/ {f = 1; print; next}
+         f && (/^ *Start +[0-9]+:/ || /^ *[0-9]+\/[0-9]+ Test +#/) {f = 0}
+         f {print}' "$log" | tail -n 60 > "$excerpt"
+    [ -s "$excerpt" ] && failure_logs+=("$step|$excerpt")
   fi
+  rm -f "$log"
   note "$step took $(( $(date +%s) - t )) s"
 }
 exclude="hil|soak"
@@ -100,6 +113,11 @@ if [ "$o3_unit" = 1 ]; then
   run_step "$o3 unit tests" "build/$o3" ctest --test-dir "build/$o3" -L unit --output-on-failure -j "$(nproc)"
 fi
 
+for entry in "${failure_logs[@]}"; do
+  echo "== what the failed tests of ${entry%%|*} printed (last 60 lines) =="
+  cat "${entry#*|}"
+  rm -f "${entry#*|}"
+done
 echo "== summary =="
 printf 'test.sh: %s\n' "${summary[@]}"
 echo "test.sh: total $(( $(date +%s) - start )) s, status $status"
