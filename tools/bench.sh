@@ -72,8 +72,9 @@ to_ns() {  # value unit -> ns
 }
 median_ns() {  # prog benchmark -> cpu ns (empty if missing)
   local row
-  row=$(awk -F, -v p="$1" -v n="$2" '$1 == p && $2 == n { print $4 " " $5; exit }' "$tmp/medians.csv")
-  [ -n "$row" ] && to_ns $row
+  # The name may carry Google Benchmark's suffixes (BM_ServoLoopCycle/min_time:2.000).
+  row=$(awk -F, -v p="$1" -v n="$2" '$1 == p && ($2 == n || index($2, n "/") == 1) { print $4 " " $5; exit }' "$tmp/medians.csv")
+  if [ -n "$row" ]; then to_ns $row; fi
 }
 
 printf '%-14s %-34s %14s %14s\n' program benchmark "cpu median" "wall median"
