@@ -48,10 +48,16 @@ double FirFilter::progress(double k, double n) const noexcept {
   if (k - last >= n) return n;
   // Taps i <= k-n see the whole block (n), taps k-n < i < k see k-i, taps i >= k none. With real k
   // and n the boundaries are floor(k - n) and ceil(k) - 1 (equal to k - n and k - 1 for integers).
-  const std::int64_t a = std::clamp<std::int64_t>(static_cast<std::int64_t>(std::floor(k - n)), -1,
-                                                  length_ - 1);
-  const std::int64_t b =
-      std::min<std::int64_t>(static_cast<std::int64_t>(std::ceil(k)) - 1, length_ - 1);
+  // floor and ceil by truncation (the look-ahead planner's verification calls this per pulse and
+  // period; std::floor / std::ceil are library calls without SSE4.1). k > 0 and k - n > -2^62
+  // here: the truncated values are exact.
+  const double kn = k - n;
+  auto fl = static_cast<std::int64_t>(kn);
+  if (static_cast<double>(fl) > kn) --fl;
+  auto ce = static_cast<std::int64_t>(k);
+  if (static_cast<double>(ce) < k) ++ce;
+  const std::int64_t a = std::clamp<std::int64_t>(fl, -1, length_ - 1);
+  const std::int64_t b = std::min<std::int64_t>(ce - 1, length_ - 1);
   double sum = n * p_[static_cast<std::size_t>(a + 1)];
   if (b >= a + 1) {
     sum += k * (p_[static_cast<std::size_t>(b + 1)] - p_[static_cast<std::size_t>(a + 1)]) -

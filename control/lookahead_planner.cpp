@@ -765,10 +765,16 @@ bool LookaheadPlanner::verify(const VerifyState& vs0, std::int64_t t_commit, Ver
   const double tau_end = st_end_.tau;
   const auto t_end = static_cast<std::int64_t>(std::ceil(tau_end - 1e-9)) + L_ - 1;
   std::vector<std::pair<std::int64_t, double>> open = vs0.vbest;
-  auto start_pt = [&](const Pulse& p) { return point(chord(p.chord), p.x0); };
-  auto end_pt = [&](const Pulse& p) { return point(chord(p.chord), p.x1); };
+  seq_geo_.resize(seq_.size());
+  for (std::size_t i = 0; i < seq_.size(); ++i) {
+    const Chord& c = chord(seq_[i].chord);
+    PulseGeo& g = seq_geo_[i];
+    g.p0 = point(c, seq_[i].x0);
+    g.p1 = point(c, seq_[i].x1);
+    g.d = g.p1 - g.p0;
+  }
   std::size_t lo = 0, hi = 0;
-  Vector3d base = seq_.empty() ? vs0.y : start_pt(seq_[0]);
+  Vector3d base = seq_.empty() ? vs0.y : seq_geo_[0].p0;
   Vector3d y_prev = vs0.y;
   std::int64_t pmin = -1, pmax = -1;  // chord range of the previous period
   if (!vs0.tail.empty()) {
@@ -794,14 +800,14 @@ bool LookaheadPlanner::verify(const VerifyState& vs0, std::int64_t t_commit, Ver
     const double td = static_cast<double>(t);
     while (hi < seq_.size() && seq_[hi].t0 < td) ++hi;
     while (lo < hi && seq_[lo].t0 + seq_[lo].dur + (L_ - 1) <= td) {
-      base = end_pt(seq_[lo]);
+      base = seq_geo_[lo].p1;
       ++lo;
     }
     Vector3d y = base;
     for (std::size_t i = lo; i < hi; ++i) {
       const Pulse& p = seq_[i];
       const double f = fir_.progress(td - p.t0, p.dur) / p.dur;
-      y += f * (end_pt(p) - start_pt(p));
+      y += f * seq_geo_[i].d;
     }
     std::int64_t cmin = -1, cmax = -1;
     if (lo < hi) {

@@ -222,6 +222,12 @@ class LookaheadPlanner {
   State st_commit_, st_end_;
   std::vector<Eigen::Vector3d> chord_buf_;
   std::vector<Pulse> seq_;
+  // verify(): each pulse's start point and programmed displacement, computed once per
+  // verification instead of once per pulse and output period.
+  struct PulseGeo {
+    Eigen::Vector3d p0, p1, d;  // d = p1 - p0
+  };
+  std::vector<PulseGeo> seq_geo_;
 
   std::deque<PlannedSegment> out_;
   std::vector<std::string> messages_;
