@@ -118,6 +118,7 @@ void OverlapPlanner::barrier(SegmentKind kind, const std::string& msg, const Blo
   // The path stops exactly on the last vertex: nothing before it can change any more.
   vtx_.clear();
   win_.clear();
+  win_cache_.valid = false;
 }
 
 void OverlapPlanner::add_move(const Block& b, const Eigen::Vector3d& a, const Eigen::Vector3d& e,
@@ -170,9 +171,44 @@ void OverlapPlanner::add_move(const Block& b, const Eigen::Vector3d& a, const Ei
   decide(m);
 }
 
-Eigen::Vector3d OverlapPlanner::q(std::int64_t t) const {
+void OverlapPlanner::refresh_window_cache() {
+  WinCache& c = win_cache_;
+  const std::size_t w = win_.size();
+  c.sum.resize(w + 1);
+  c.fin.resize(w + 1);
+  c.mid.resize(w);
+  c.half.resize(w);
+  c.valid = w > 0;
+  if (w == 0) return;
   Eigen::Vector3d x = win_.front().a;
-  for (const auto& m : win_) {
+  std::int64_t fin = std::numeric_limits<std::int64_t>::min();
+  c.sum[0] = x;
+  c.fin[0] = fin;
+  for (std::size_t i = 0; i < w; ++i) {
+    const Move& m = win_[i];
+    x += m.b - m.a;
+    fin = std::max(fin, m.finish(tail_));
+    c.sum[i + 1] = x;
+    c.fin[i + 1] = fin;
+    c.mid[i] = 0.5 * (m.a + m.b);
+    c.half[i] = 0.5 * (m.b - m.a).norm();
+  }
+}
+
+Eigen::Vector3d OverlapPlanner::q(std::int64_t t) const {
+  std::size_t k0 = 0;
+  Eigen::Vector3d x;
+  if (win_cache_.valid) {
+    // Moves 0..k0-1 have all finished by t (t >= each finish(tail_) = s + n + L - 1, where
+    // progress returns n): their sum is cached, added in the same order as below.
+    const auto& fin = win_cache_.fin;
+    k0 = static_cast<std::size_t>(std::upper_bound(fin.begin() + 1, fin.end(), t) - (fin.begin() + 1));
+    x = win_cache_.sum[k0];
+  } else {
+    x = win_.front().a;
+  }
+  for (auto it = win_.begin() + static_cast<std::ptrdiff_t>(k0); it != win_.end(); ++it) {
+    const Move& m = *it;
     if (m.s >= t) break;
     x += (m.b - m.a) * (fir_.progress(t - m.s, m.n) / static_cast<double>(m.n));
   }
@@ -185,13 +221,42 @@ double OverlapPlanner::dist_seg(const Eigen::Vector3d& x, std::size_t i) const {
 
 double OverlapPlanner::dist_path(const Eigen::Vector3d& x, int* arg) const {
   double best = std::numeric_limits<double>::infinity();
-  for (std::size_t i = 0; i < win_.size(); ++i) {
-    const double d = dist_seg(x, i);
+  const std::size_t w = win_.size();
+  if (!win_cache_.valid || win_cache_.mid.size() != w) {
+    for (std::size_t i = 0; i < w; ++i) {
+      const double d = dist_seg(x, i);
+      if (d < best) {
+        best = d;
+        if (arg != nullptr) *arg = static_cast<int>(i);
+      }
+    }
+    return best;
+  }
+  // The result is the smallest distance and the first move that has it. A move whose bounding
+  // sphere (midpoint, half length) is farther from x than ub, the distance to the move found
+  // nearest last time (>= the minimum), is strictly farther than the minimum: it is neither, and
+  // is skipped. The margin (1 nm per metre of coordinates, and 1 pm) covers the rounding of the
+  // sphere test.
+  const std::size_t h = dist_hint_ < w ? dist_hint_ : w - 1;
+  const double dh = dist_seg(x, h);
+  const double margin = 1e-9 + 1e-12 * x.cwiseAbs().maxCoeff();
+  std::size_t best_i = h;
+  for (std::size_t i = 0; i < w; ++i) {
+    double d;
+    if (i == h) {
+      d = dh;
+    } else {
+      const double r = dh + win_cache_.half[i] + margin;
+      if ((x - win_cache_.mid[i]).squaredNorm() > r * r) continue;
+      d = dist_seg(x, i);
+    }
     if (d < best) {
       best = d;
-      if (arg != nullptr) *arg = static_cast<int>(i);
+      best_i = i;
     }
   }
+  dist_hint_ = best_i;
+  if (arg != nullptr) *arg = static_cast<int>(best_i);
   return best;
 }
 
@@ -199,6 +264,11 @@ double OverlapPlanner::chord_max(const Eigen::Vector3d& A, const Eigen::Vector3d
   int ia = 0, ib = 0;
   const double da = dist_path(A, &ia);
   const double db = dist_path(B, &ib);
+  return chord_max(A, da, ia, B, db, ib);
+}
+
+double OverlapPlanner::chord_max(const Eigen::Vector3d& A, double da, int ia, const Eigen::Vector3d& B,
+                                 double db, int ib) const {
   double worst = std::max(da, db);
   if (ia == ib) return worst;  // one convex distance function bounds the whole chord
   // min(d_ia, d_ib) >= true distance; its maximum on the chord is at an end or where they cross.
@@ -216,6 +286,7 @@ double OverlapPlanner::chord_max(const Eigen::Vector3d& A, const Eigen::Vector3d
 
 void OverlapPlanner::extend_fixed(std::int64_t until) {
   if (vtx_.empty()) return;
+  refresh_window_cache();
   // Only the newest move can be in motion alone after every older one stopped: straight run.
   std::int64_t t_single = win_.back().s;
   for (std::size_t i = 0; i + 1 < win_.size(); ++i) t_single = std::max(t_single, win_[i].finish(tail_));
@@ -232,6 +303,7 @@ void OverlapPlanner::extend_fixed(std::int64_t until) {
     v.fixed_from = until;
   }
   std::erase_if(vtx_, [](const Vertex& v) { return v.fixed_best <= v.eps; });
+  win_cache_.valid = false;  // the caller adds a move next
 }
 
 double OverlapPlanner::verify(std::int64_t g, double eps) {
@@ -242,27 +314,46 @@ double OverlapPlanner::verify(std::int64_t g, double eps) {
   m.s = fixed + g;
   std::int64_t t1 = m.s;
   for (std::size_t i = 0; i + 1 < win_.size(); ++i) t1 = std::max(t1, win_[i].finish(tail_));
+  refresh_window_cache();
+  // q(t) for t in [fixed, t1], each computed once: the path check and every pending vertex's
+  // check walk the same samples.
+  const auto span = static_cast<std::size_t>(t1 - fixed + 1);
+  q_buf_.resize(span);
+  q_have_.assign(span, 0);
+  auto qt = [&](std::int64_t t) -> const Eigen::Vector3d& {
+    const auto i = static_cast<std::size_t>(t - fixed);
+    if (q_have_[i] == 0) {
+      q_buf_[i] = q(t);
+      q_have_[i] = 1;
+    }
+    return q_buf_[i];
+  };
   double emax = 0.0;
-  std::vector<double>* none = nullptr;
-  (void)none;
   // Path error on every chord where two or more moves are in motion.
-  Eigen::Vector3d prev = q(m.s);
+  // (Each sample's distance to the path is found once: the end of one chord starts the next.)
+  Eigen::Vector3d prev = qt(m.s);
+  int i_prev = 0;
+  double d_prev = dist_path(prev, &i_prev);
   for (std::int64_t t = m.s + 1; t <= t1; ++t) {
-    const Eigen::Vector3d cur = q(t);
-    const double e = chord_max(prev, cur);
+    const Eigen::Vector3d cur = qt(t);
+    int i_cur = 0;
+    const double d_cur = dist_path(cur, &i_cur);
+    const double e = chord_max(prev, d_prev, i_prev, cur, d_cur, i_cur);
     if (e > eps) return std::numeric_limits<double>::infinity();
     emax = std::max(emax, e);
     prev = cur;
+    d_prev = d_cur;
+    i_prev = i_cur;
   }
   // Two-sided: every pending vertex within its eps of the sampled polyline.
   if (!vtx_.empty()) {
-    const Eigen::Vector3d after = q(t1);
+    const Eigen::Vector3d after = qt(t1);
     for (const auto& v : vtx_) {
       double best = v.fixed_best;
       if (best <= v.eps) continue;
-      Eigen::Vector3d p0 = q(fixed);
+      Eigen::Vector3d p0 = qt(fixed);
       for (std::int64_t t = fixed + 1; t <= t1 && best > v.eps; ++t) {
-        const Eigen::Vector3d cur = q(t);
+        const Eigen::Vector3d cur = qt(t);
         best = std::min(best, distance_point_segment(v.p, p0, cur));
         p0 = cur;
       }
@@ -345,6 +436,7 @@ void OverlapPlanner::emit(const Move& m) {
 }
 
 void OverlapPlanner::decide(Move& m) {
+  win_cache_.valid = false;  // the window changes below; verify() and extend_fixed() refresh it
   if (win_.empty() || stop_before_next_) {
     m.s = earliest_start_;
     if (!win_.empty()) m.s = std::max(m.s, win_.back().finish(tail_));
@@ -424,6 +516,7 @@ void OverlapPlanner::decide(Move& m) {
   std::int64_t need = nm.s;
   for (const auto& v : vtx_) need = std::min(need, v.fixed_from);
   while (win_.size() > 2 && win_.front().finish(tail_) <= need) win_.pop_front();
+  win_cache_.valid = false;
   stats_.max_window = std::max(stats_.max_window, win_.size());
 }
 
