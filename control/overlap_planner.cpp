@@ -235,8 +235,8 @@ double OverlapPlanner::dist_path(const Eigen::Vector3d& x, int* arg) const {
   // The result is the smallest distance and the first move that has it. A move whose bounding
   // sphere (midpoint, half length) is farther from x than ub, the distance to the move found
   // nearest last time (>= the minimum), is strictly farther than the minimum: it is neither, and
-  // is skipped. The margin (1 nm per metre of coordinates, and 1 pm) covers the rounding of the
-  // sphere test.
+  // is skipped. The margin (1 pm, plus 1 pm per metre of coordinates) covers the rounding of the
+  // sphere test and of the distances. (A NaN sample gives +inf either way, as before: the check fails.)
   const std::size_t h = dist_hint_ < w ? dist_hint_ : w - 1;
   const double dh = dist_seg(x, h);
   const double margin = 1e-9 + 1e-12 * x.cwiseAbs().maxCoeff();
