@@ -118,7 +118,6 @@ void OverlapPlanner::barrier(SegmentKind kind, const std::string& msg, const Blo
   // The path stops exactly on the last vertex: nothing before it can change any more.
   vtx_.clear();
   win_.clear();
-  win_cache_.valid = false;
 }
 
 void OverlapPlanner::add_move(const Block& b, const Eigen::Vector3d& a, const Eigen::Vector3d& e,
@@ -178,7 +177,6 @@ void OverlapPlanner::refresh_window_cache() {
   c.fin.resize(w + 1);
   c.mid.resize(w);
   c.half.resize(w);
-  c.valid = w > 0;
   if (w == 0) return;
   Eigen::Vector3d x = win_.front().a;
   std::int64_t fin = std::numeric_limits<std::int64_t>::min();
@@ -196,17 +194,12 @@ void OverlapPlanner::refresh_window_cache() {
 }
 
 Eigen::Vector3d OverlapPlanner::q(std::int64_t t) const {
-  std::size_t k0 = 0;
-  Eigen::Vector3d x;
-  if (win_cache_.valid) {
-    // Moves 0..k0-1 have all finished by t (t >= each finish(tail_) = s + n + L - 1, where
-    // progress returns n): their sum is cached, added in the same order as below.
-    const auto& fin = win_cache_.fin;
-    k0 = static_cast<std::size_t>(std::upper_bound(fin.begin() + 1, fin.end(), t) - (fin.begin() + 1));
-    x = win_cache_.sum[k0];
-  } else {
-    x = win_.front().a;
-  }
+  // Moves 0..k0-1 have all finished by t (t >= each finish(tail_) = s + n + L - 1, where
+  // progress returns n): their sum is cached, added in the same order as below.
+  const auto& fin = win_cache_.fin;
+  const auto k0 =
+      static_cast<std::size_t>(std::upper_bound(fin.begin() + 1, fin.end(), t) - (fin.begin() + 1));
+  Eigen::Vector3d x = win_cache_.sum[k0];
   for (auto it = win_.begin() + static_cast<std::ptrdiff_t>(k0); it != win_.end(); ++it) {
     const Move& m = *it;
     if (m.s >= t) break;
@@ -222,16 +215,6 @@ double OverlapPlanner::dist_seg(const Eigen::Vector3d& x, std::size_t i) const {
 double OverlapPlanner::dist_path(const Eigen::Vector3d& x, int* arg) const {
   double best = std::numeric_limits<double>::infinity();
   const std::size_t w = win_.size();
-  if (!win_cache_.valid || win_cache_.mid.size() != w) {
-    for (std::size_t i = 0; i < w; ++i) {
-      const double d = dist_seg(x, i);
-      if (d < best) {
-        best = d;
-        if (arg != nullptr) *arg = static_cast<int>(i);
-      }
-    }
-    return best;
-  }
   // The result is the smallest distance and the first move that has it. A move whose bounding
   // sphere (midpoint, half length) is farther from x than ub, the distance to the move found
   // nearest last time (>= the minimum), is strictly farther than the minimum: it is neither, and
@@ -258,13 +241,6 @@ double OverlapPlanner::dist_path(const Eigen::Vector3d& x, int* arg) const {
   dist_hint_ = best_i;
   if (arg != nullptr) *arg = static_cast<int>(best_i);
   return best;
-}
-
-double OverlapPlanner::chord_max(const Eigen::Vector3d& A, const Eigen::Vector3d& B) const {
-  int ia = 0, ib = 0;
-  const double da = dist_path(A, &ia);
-  const double db = dist_path(B, &ib);
-  return chord_max(A, da, ia, B, db, ib);
 }
 
 double OverlapPlanner::chord_max(const Eigen::Vector3d& A, double da, int ia, const Eigen::Vector3d& B,
@@ -303,7 +279,6 @@ void OverlapPlanner::extend_fixed(std::int64_t until) {
     v.fixed_from = until;
   }
   std::erase_if(vtx_, [](const Vertex& v) { return v.fixed_best <= v.eps; });
-  win_cache_.valid = false;  // the caller adds a move next
 }
 
 double OverlapPlanner::verify(std::int64_t g, double eps) {
@@ -436,7 +411,6 @@ void OverlapPlanner::emit(const Move& m) {
 }
 
 void OverlapPlanner::decide(Move& m) {
-  win_cache_.valid = false;  // the window changes below; verify() and extend_fixed() refresh it
   if (win_.empty() || stop_before_next_) {
     m.s = earliest_start_;
     if (!win_.empty()) m.s = std::max(m.s, win_.back().finish(tail_));
@@ -516,7 +490,6 @@ void OverlapPlanner::decide(Move& m) {
   std::int64_t need = nm.s;
   for (const auto& v : vtx_) need = std::min(need, v.fixed_from);
   while (win_.size() > 2 && win_.front().finish(tail_) <= need) win_.pop_front();
-  win_cache_.valid = false;
   stats_.max_window = std::max(stats_.max_window, win_.size());
 }
 

@@ -106,13 +106,13 @@ class OverlapPlanner {
   void barrier(SegmentKind kind, const std::string& msg, const Block& b, double extra_s);
   void emit(const Move& m);
   Eigen::Vector3d q(std::int64_t t) const;  // true path at plan time t from the window
-  // The window's cache for q() and dist_path() (planning speed, same results to the bit):
-  // refreshed by verify() and extend_fixed() before they evaluate the window; see win_cache_.
+  // The window's cache that q() and dist_path() read (planning speed, same results to the bit):
+  // verify() and extend_fixed() refresh it before they evaluate the window; see win_cache_.
   void refresh_window_cache();
   double dist_path(const Eigen::Vector3d& x, int* arg) const;
   double dist_seg(const Eigen::Vector3d& x, std::size_t i) const;
-  double chord_max(const Eigen::Vector3d& A, const Eigen::Vector3d& B) const;
-  // The same with the ends' distances to the path and nearest moves already known.
+  // Largest distance to the path along the chord A-B, given the ends' distances to the path and
+  // their nearest moves (dist_path).
   double chord_max(const Eigen::Vector3d& A, double da, int ia, const Eigen::Vector3d& B, double db,
                    int ib) const;
   // Checks gap g for the newest window move; returns the max error (mm) or +inf on failure.
@@ -126,7 +126,7 @@ class OverlapPlanner {
   double path_mm_ = 0.0;
   std::int64_t next_id_ = 0;
   std::deque<Move> win_;
-  // Window cache (valid while win_ and its start times stay as refresh_window_cache() saw them):
+  // Window cache (holds while win_ and its start times stay as refresh_window_cache() saw them):
   //   sum[k]: win_[0].a + the displacements of moves 0..k-1, added in q()'s order (a move whose
   //           FIR output has ended contributes exactly its displacement: progress = n, n / n = 1);
   //   fin[k]: the latest finish(tail_) of moves 0..k-1 (q(t) starts at sum[k] for the largest k
@@ -134,7 +134,6 @@ class OverlapPlanner {
   //   mid/half: each move's midpoint and half length (dist_path skips a move whose bounding
   //           sphere lies farther than a distance already found).
   struct WinCache {
-    bool valid = false;
     std::vector<Eigen::Vector3d> sum;
     std::vector<std::int64_t> fin;
     std::vector<Eigen::Vector3d> mid;
