@@ -163,6 +163,39 @@ TEST(PlcEngine, LubePumpRunsOnEnableAndEveryMinute) {
   EXPECT_NEAR(static_cast<double>(r.cycle), 100 + 60000, 100);
 }
 
+// A fault and reset during a pump run: re-enabling gives the lube a fresh 2.5 s window to build
+// pressure. (The pressure seen as missing 2.4 s into the run, the machine faulting and being reset
+// then: the no-pressure timer once ran on through the re-enable and latched the alarm 0.1 s after
+// it, inhibiting start until the next enable; seen in HIL after a lost coupler.)
+TEST(PlcEngine, ReEnableRestartsTheLubePressureWindow) {
+  Rig r(example());
+  r.in.state = MachineState::kReady;
+  ASSERT_TRUE(r.scan_until([&] { return r.value("lube_pump").i == 1; }, 40));
+  ASSERT_EQ(r.engine.force("lube_pressure_ok", "FALSE"), "");  // the inputs' default: coupler lost
+  r.scan(2000);
+  r.in.state = MachineState::kFault;
+  r.scan(400);
+  EXPECT_EQ(r.value("lube_alarm").i, 0);  // 2.4 s: not yet
+  r.in.state = MachineState::kReady;       // reset: the drives are enabled again
+  r.scan(500);                             // the pump builds pressure again (1.5 s in the plant)
+  EXPECT_EQ(r.value("lube_alarm").i, 0);
+  ASSERT_EQ(r.engine.unforce("lube_pressure_ok"), "");
+  r.scan(1500);
+  EXPECT_EQ(r.value("lube_pressure_ok").i, 1);
+  EXPECT_EQ(r.value("lube_alarm").i, 0);
+  EXPECT_FALSE(r.out.requests.inhibit_start);
+  // Pressure that never comes after the enable still raises the alarm, 2.5 s into the run.
+  r.in.state = MachineState::kDisabled;
+  r.scan(20);
+  ASSERT_EQ(r.engine.force("lube_pressure_ok", "FALSE"), "");
+  r.in.state = MachineState::kReady;
+  r.scan(2400);
+  EXPECT_EQ(r.value("lube_alarm").i, 0);
+  EXPECT_TRUE(r.scan_until([&] { return r.value("lube_alarm").i == 1; }, 200));
+  r.scan(20);  // interlocks.st reads the memory signal at its next scan
+  EXPECT_TRUE(r.out.requests.inhibit_start);
+}
+
 TEST(PlcEngine, OvertravelSwitchFaultsItsAxis) {
   Rig r(example());
   r.scan();
