@@ -247,6 +247,12 @@ json Daemon::status_json() {
     } else if (st.fault_axis >= 0 && st.fault_axis < axes) {
       j["fault"]["axis_name"] = cfg_.machine.axes[static_cast<std::size_t>(st.fault_axis)].name;
     }
+    // A missed-TPDO streak: which inputs stopped ("position": TPDO1, "digital_inputs": 0x60FD).
+    if (st.cause == FaultCause::kMissedTpdo) {
+      j["fault"]["pdo"] = st.fault_detail == static_cast<std::uint8_t>(MissedPdo::kDigitalInputs)
+                              ? "digital_inputs"
+                              : "position";
+    }
   }
   // A programmed pause (M0, M1, M6): what it waits for. An M6 is a manual tool change.
   if (st.interp_holding) {
@@ -910,7 +916,19 @@ json Daemon::handle(const json& req, const ClientInfo& client) {
       // A program that pauses at once (T1 M6 first, M0) is running: it waits for `resume`.
       const bool paused = now == S::kHold && loop_->status().interp_holding;
       if (now != S::kRunning && !paused && loop_->status().finished_job != job) {
-        throw CommandError("run refused by the loop (state " + std::string(to_string(now)) + ")");
+        // What the loop's run rule found (ServoLoop::apply_command, kRun), as far as status shows.
+        const auto after = loop_->status();
+        std::string why;
+        if (after.plc_requests.inhibit_start) {
+          why = ": the machine logic inhibits start (NC.inhibit_start; contourctl plc status)";
+        } else if (after.jogging) {
+          why = ": a jog is active";
+        } else if (after.homing) {
+          why = ": homing is active";
+        } else if (after.attached_job != job) {
+          why = ": the program is no longer loaded";
+        }
+        throw CommandError("run refused by the loop (state " + std::string(to_string(now)) + ")" + why);
       }
       return {{"job", job}, {"state", to_string(now)}};
     }
