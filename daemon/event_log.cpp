@@ -115,7 +115,10 @@ std::string describe(const RtEvent& e) {
       } else if (e.cause == FaultCause::kSoftLimit) {
         o << ": reference " << e.value << " mm beyond limit " << e.limit << " mm";
       } else if (e.cause == FaultCause::kMissedTpdo) {
-        o << ": " << e.value << " missed TPDOs in a row";
+        o << ": " << e.value << " missed TPDOs in a row"
+          << (e.detail == static_cast<std::uint8_t>(MissedPdo::kDigitalInputs)
+                  ? " (0x60FD digital inputs; the position still came)"
+                  : "");
       } else if (e.cause == FaultCause::kForceStale) {
         o << ": sample age " << e.value << " s > " << e.limit << " s (or invalid)";
       } else if (e.cause == FaultCause::kDriveEmcy ||

@@ -24,6 +24,9 @@ struct Feedback {
   // it is this cycle's).
   Eigen::Vector3d act_mm = Eigen::Vector3d::Zero();
   std::array<int, kMaxAxes> missed_streak{};  // consecutive cycles without a TPDO, per axis
+  // Consecutive cycles without the drive's 0x60FD digital inputs (TPDO2 on CANopen), per axis
+  // that has them (AxisFeedback::digital_inputs_present); 0 for an axis without.
+  std::array<int, kMaxAxes> inputs_missed_streak{};
   // Force channel input (RtIo with a dynamometer; zero / kNoData without).
   drivers::modbus::ForceReading force{};
   std::array<double, 3> force_xyz_N{};  // filtered channels (0 when not mapped)

@@ -100,6 +100,8 @@ std::string describe(const ResetBlock& b) {
     case FaultCause::kIoModule:
       return "the CiA 401 I/O module " + who + " is not NMT operational";
     case FaultCause::kEstopInput: return "the E-stop input is still asserted";
+    case FaultCause::kMissedTpdo:
+      return "the drive of " + who + " still does not send its 0x60FD digital inputs (TPDO2)";
     case FaultCause::kPlcFault:
     case FaultCause::kPlcEstop:
       return "the machine logic still requests an E-stop, a fault or an axis fault, or a latched "
@@ -139,7 +141,8 @@ FaultReport SafetySupervisor::check_bus(const Feedback& fb, bool servo) const no
   for (int i = 0; i < axes_; ++i) {
     const AxisFeedback& ax = fb.bus.axis[static_cast<std::size_t>(i)];
     any = any || ax.fault || ax.nmt_lost || (servo && ax.fresh && !ax.enabled) ||
-          fb.missed_streak[static_cast<std::size_t>(i)] >= missed_tpdo_streak_;
+          fb.missed_streak[static_cast<std::size_t>(i)] >= missed_tpdo_streak_ ||
+          fb.inputs_missed_streak[static_cast<std::size_t>(i)] >= missed_tpdo_streak_;
   }
   if (!any) return {};
   for (int i = 0; i < axes_; ++i) {
@@ -188,6 +191,16 @@ FaultReport SafetySupervisor::check_bus(const Feedback& fb, bool servo) const no
     if (fb.missed_streak[a] >= missed_tpdo_streak_) {
       return {FaultCause::kMissedTpdo, i, static_cast<double>(fb.missed_streak[a]),
               static_cast<double>(missed_tpdo_streak_)};
+    }
+  }
+  // The position came but the digital inputs did not (a drive that lost or never sends its
+  // TPDO2): the same streak, its own detail.
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    if (fb.inputs_missed_streak[a] >= missed_tpdo_streak_) {
+      return {FaultCause::kMissedTpdo, i, static_cast<double>(fb.inputs_missed_streak[a]),
+              static_cast<double>(missed_tpdo_streak_),
+              static_cast<std::uint8_t>(MissedPdo::kDigitalInputs)};
     }
   }
   return {};
@@ -240,6 +253,13 @@ ResetBlock SafetySupervisor::reset_block(const Feedback& fb, bool estop_tripped)
     if (m.nmt_lost) return {FaultCause::kIoModule, -1, m.node_id};
   }
   if (fb.bus.bus_error) return {FaultCause::kBusError, -1, 0};
+  // Digital inputs that stopped while the position kept coming: back only when they come again
+  // (a lost position is judged afresh after the reset, as before).
+  for (int i = 0; i < axes_; ++i) {
+    const auto a = static_cast<std::size_t>(i);
+    if (fb.inputs_missed_streak[a] >= missed_tpdo_streak_)
+      return {FaultCause::kMissedTpdo, i, fb.bus.axis[a].node_id};
+  }
   return {};
 }
 

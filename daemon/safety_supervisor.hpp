@@ -53,6 +53,10 @@ double following_band_mm(const LiveLimits& l, int axis, double v_ref_mm_s) noexc
 
 // FaultCause::kIoModule: what the CiA 401 module did (FaultReport::detail).
 enum class IoModuleFault : std::uint8_t { kNone, kTpdoMissed, kEmcy, kNmt };
+// FaultCause::kMissedTpdo: which of the drive's inputs stopped coming (FaultReport::detail): its
+// position (TPDO1), or only its 0x60FD digital inputs (TPDO2: limit and home switches, probes
+// the PLC reads), whose loss would otherwise leave the PLC on the signals' defaults unannounced.
+enum class MissedPdo : std::uint8_t { kPosition, kDigitalInputs };
 
 struct FaultReport {
   FaultCause cause = FaultCause::kNone;

@@ -201,6 +201,7 @@ void ServoLoop::raise_fault(const FaultReport& f) noexcept {
   fault_axis_ = f.axis;
   fault_value_ = f.value;
   fault_limit_ = f.limit;
+  fault_detail_ = f.detail;
   emit(EventKind::kFault, f.cause, f.axis, f.value, f.limit, f.detail);
   transition(t, f.cause);
   detach_job(false);
@@ -590,6 +591,7 @@ bool ServoLoop::try_reset() noexcept {
   force_.clear_fallback();
   fault_axis_ = -1;
   fault_value_ = fault_limit_ = 0.0;
+  fault_detail_ = 0;
   fb_.missed_streak.fill(0);
   transition(sm_.apply(Request::kEnable), FaultCause::kNone);
   return true;
@@ -780,6 +782,11 @@ void ServoLoop::read() noexcept {
       drive_inputs_age_[a] = 0;
     } else if (drive_inputs_age_[a] < kDriveInputsNever) {
       ++drive_inputs_age_[a];
+    }
+    if (!fb_.bus.axis[a].digital_inputs_present || fb_.bus.axis[a].digital_inputs_fresh) {
+      fb_.inputs_missed_streak[a] = 0;
+    } else if (fb_.inputs_missed_streak[a] < kDriveInputsNever) {
+      ++fb_.inputs_missed_streak[a];
     }
   }
   for (int k = 0; k < fb_.bus.io_modules && k < static_cast<int>(kMaxIoModules); ++k) {
@@ -1256,6 +1263,7 @@ void ServoLoop::publish() noexcept {
   pub_.fault_axis = fault_axis_;
   pub_.fault_value = fault_value_;
   pub_.fault_limit = fault_limit_;
+  pub_.fault_detail = fault_detail_;
   for (std::size_t i = 0; i < 3; ++i) {
     pub_.ref_mm[i] = ref_[static_cast<Eigen::Index>(i)];
     pub_.act_mm[i] = fb_.act_mm[static_cast<Eigen::Index>(i)];

@@ -169,6 +169,7 @@ struct LoopStatus {
   int fault_axis = -1;
   double fault_value = 0.0;
   double fault_limit = 0.0;
+  std::uint8_t fault_detail = 0;  // FaultReport::detail (kMissedTpdo: MissedPdo)
   std::array<double, 3> ref_mm{};
   std::array<double, 3> act_mm{};
   std::array<double, 3> cmd_mm_s{};
@@ -477,6 +478,7 @@ class ServoLoop {
   bool recording_ = false;
   int fault_axis_ = -1;
   double fault_value_ = 0.0, fault_limit_ = 0.0;
+  std::uint8_t fault_detail_ = 0;  // FaultReport::detail
   std::uint64_t finished_job_ = 0, released_job_ = 0, finished_cycle_ = 0;
   bool finished_ok_ = false;
   std::uint64_t missed_tpdos_ = 0, clamps_ = 0;

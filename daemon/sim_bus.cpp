@@ -258,6 +258,10 @@ void SimBus::read(BusFeedback& fb) noexcept {
     // value, not fresh.
     f.digital_inputs_present = true;
     f.digital_inputs_fresh = f.fresh;
+    if (const int n = drop_input_tpdos_[a].load(std::memory_order_relaxed); n != 0) {
+      if (n > 0) drop_input_tpdos_[a].fetch_sub(1, std::memory_order_relaxed);
+      f.digital_inputs_fresh = false;
+    }
     if (f.fresh) di_last_[a] = inputs_at(a, drive_[a].position_mm());
     f.digital_inputs = di_last_[a];
     // Encoder index: a pulse between the previous true position and this one is latched at its

@@ -46,6 +46,11 @@ class SimBus final : public AxisBus {
   void inject_drive_disabled(int axis, bool on) noexcept {
     disabled_[static_cast<std::size_t>(axis)] = on;
   }
+  // The next `count` cycles without the axis' 0x60FD digital inputs only (a drive whose TPDO2
+  // stops while its position still comes); -1: from now on, until cleared with 0.
+  void inject_inputs_tpdo_drop(int axis, int count) noexcept {
+    drop_input_tpdos_[static_cast<std::size_t>(axis)] = count;
+  }
   // The next `count` TPDOs of an axis do not arrive (stale feedback; a streak faults the loop).
   void inject_tpdo_drop(int axis, int count) noexcept {
     drop_tpdos_[static_cast<std::size_t>(axis)] = count;
@@ -126,6 +131,7 @@ class SimBus final : public AxisBus {
   std::array<std::atomic<bool>, kMaxAxes> fault_{};
   std::array<std::atomic<bool>, kMaxAxes> disabled_{};
   std::array<std::atomic<int>, kMaxAxes> drop_tpdos_{};
+  std::array<std::atomic<int>, kMaxAxes> drop_input_tpdos_{};
   double spindle_tau_s_ = 0.0;
   double spindle_rpm_ = 0.0;
   double spindle_latched_rpm_ = 0.0;

@@ -54,7 +54,8 @@ struct Files {
   fs::path dir;
 };
 
-// One test (the HIL budget): the mapped I/O, then the start-up error with a second simulator.
+// One test (the HIL budget): the mapped I/O, a TPDO2-only gap, then the start-up error with a
+// third simulator.
 TEST(DriveIoHil, CamInTpdo2OutputInRpdo2AndMissing60FDOverVcan) {
   Files f;
   const auto cfg = contour::config::load_config_file(f.config());
@@ -88,6 +89,37 @@ TEST(DriveIoHil, CamInTpdo2OutputInRpdo2AndMissing60FDOverVcan) {
     EXPECT_EQ(contour::drivers::canopen::get_u32(mask.data()), 1u << 17);
     const auto y = bus.master()->sdo_upload(2, 0x60FE, 1);
     EXPECT_EQ(contour::drivers::canopen::get_u32(y.data()), 0u);  // Y maps no outputs
+    bus.stop();
+  }
+  {
+    // A drive whose TPDO2 stops for 10 SYNCs while TPDO1 goes on: the position stays fresh, the
+    // inputs are reported not fresh for exactly those cycles (the loop's missed-TPDO rule then
+    // faults the machine: PlcDriveIo.LostDigitalInputsAlone... in the unit tests).
+    contour::test::MachineSim sim({"--input-switch", "1:16:above:-1", "--drop-tpdo2", "1:20:10"},
+                                  f.config());
+    ASSERT_TRUE(sim.ready()) << sim.poll_output();
+    CanopenBus bus(cfg, {});
+    bus.set_event_thread(false);
+    bus.start();
+    AxisCommands cmd;
+    BusFeedback fb;
+    int position = 0, inputs = 0, gap_first = -1, gap_last = -1;
+    for (int k = 0; k < 60; ++k) {
+      bus.begin_cycle();
+      bus.read(fb);
+      bus.write(cmd);
+      if (fb.axis[0].fresh) ++position;
+      if (fb.axis[0].digital_inputs_fresh) {
+        ++inputs;
+      } else {
+        if (gap_first < 0) gap_first = k;
+        gap_last = k;
+      }
+    }
+    EXPECT_EQ(position, 60);
+    EXPECT_EQ(inputs, 50);
+    EXPECT_EQ(gap_last - gap_first, 9) << gap_first << ".." << gap_last;  // one gap of 10
+    EXPECT_EQ(fb.axis[0].digital_inputs, 1u << 16);  // back, the cam's value
     bus.stop();
   }
   contour::test::MachineSim sim({"--missing-object", "1:0x60FD"}, f.config());

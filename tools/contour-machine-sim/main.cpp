@@ -15,7 +15,7 @@
 // CiA 401 I/O modules (sim_drive.hpp SimIoModule): --io-module NODE[:DI:DO:AI:AO] adds one
 // (DI/DO bytes of 0x6000/0x6200, AI/AO INTEGER16 channels of 0x6401/0x6411, 0..8 each, default
 // 2:2:2:2); its outputs are looped to its inputs each SYNC; --io-input NODE:SUB:VALUE pins
-// 0x6000:SUB to VALUE (not looped). The fault and quirk flags (--drop-tpdo, --stop-heartbeat,
+// 0x6000:SUB to VALUE (not looped). The fault and quirk flags (--drop-tpdo, --drop-tpdo2, --stop-heartbeat,
 // --missing-object, --pdos, ...) take its node-id too. The summary's node entry shows its
 // objects: "io": {"0x6000": [...], "0x6200": [...], "0x6401": [...], "0x6411": [...]}.
 // The simulated machine for HIL: one process answering every bus node of the config (axes from
@@ -83,7 +83,7 @@ std::vector<long> parse_tuple(const std::string& s, std::size_t min_n, std::size
 int main(int argc, char** argv) {
   CLI::App app{"contour-machine-sim: simulated CiA 402 machine on SocketCAN (lockstep with SYNC)"};
   std::string config_path, iface, modbus;
-  std::vector<std::string> drop, fault, fault_motion, stop_hb, sdo_abort, malformed, drop_sdo;
+  std::vector<std::string> drop, drop2, fault, fault_motion, stop_hb, sdo_abort, malformed, drop_sdo;
   std::vector<std::string> missing_obj, pdos, tpdo_sampling;
   std::vector<long> expedited_only;
   std::vector<std::string> io_modules, io_inputs;
@@ -93,6 +93,8 @@ int main(int argc, char** argv) {
   app.add_option("--can", iface, "CAN interface, e.g. vcan0")->required();
   app.add_option("--modbus", modbus, "HOST:PORT of the dynamometer Modbus TCP server");
   app.add_option("--drop-tpdo", drop, "NODE:FROM_SYNC[:COUNT] drop TPDOs (COUNT 0 = forever)");
+  app.add_option("--drop-tpdo2", drop2,
+                 "NODE:FROM_SYNC[:COUNT] drop the node's TPDO2..4 only: TPDO1 still comes (COUNT 0 = forever)");
   app.add_option("--fault", fault, "NODE:SYNC[:CODE] raise a drive fault (EMCY + statusword)");
   app.add_option("--fault-after-motion", fault_motion,
                  "NODE:SYNCS[:CODE] raise a drive fault SYNCS after the node starts moving");
@@ -323,6 +325,12 @@ int main(int argc, char** argv) {
       auto& s = find(v[0]);
       s.faults.drop_tpdo_from = v[1];
       s.faults.drop_tpdo_count = v.size() > 2 ? v[2] : 0;
+    }
+    for (const auto& d : drop2) {
+      auto v = parse_tuple(d, 2, 3, "--drop-tpdo2");
+      auto& s = find(v[0]);
+      s.faults.drop_tpdo2_from = v[1];
+      s.faults.drop_tpdo2_count = v.size() > 2 ? v[2] : 0;
     }
     for (const auto& d : fault) {
       auto v = parse_tuple(d, 2, 3, "--fault");

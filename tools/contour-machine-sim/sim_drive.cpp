@@ -519,6 +519,8 @@ void SimDrive::sample_and_transmit() {
     withheld = true;
   }
   if (withheld) ++tpdo_dropped_;
+  const bool dropping2 = fl.drop_tpdo2_from >= 0 && syncs_ >= fl.drop_tpdo2_from &&
+                         (fl.drop_tpdo2_count == 0 || syncs_ < fl.drop_tpdo2_from + fl.drop_tpdo2_count);
   if (tx_due && !withheld) {
     // TPDO1, then the other valid TPDOs of this transmission type (the master's TPDO2: 0x60FD);
     // a withheld SYNC withholds them all (one missed TPDO for the master).
@@ -527,6 +529,7 @@ void SimDrive::sample_and_transmit() {
       const auto comm = static_cast<std::uint16_t>(0x1800 + p);
       if ((u32(comm, 1) & 0x80000000u) != 0) continue;
       if (p > 0) {
+        if (dropping2) continue;
         const auto t = read_int(comm, 2) & 0xFF;
         if (t < 1 || t > 240 || syncs_ % t != 0) continue;
       }

@@ -59,6 +59,10 @@ namespace contour::sim {
 struct SimFaults {
   long drop_tpdo_from = -1;   // SYNC count (since NMT start) from which TPDOs are dropped
   long drop_tpdo_count = 0;   // 0 = forever
+  // The same for the node's TPDO2..4 only (0x60FD digital inputs, touch probe): TPDO1, the
+  // position, still comes. Not counted in tpdo_dropped (the master's missed_total is TPDO1's).
+  long drop_tpdo2_from = -1;
+  long drop_tpdo2_count = 0;
   long fault_at = -1;         // raise a drive fault (EMCY + statusword) at this SYNC count
   std::uint16_t fault_code = 0x2310;
   // Raise the fault this many SYNCs after the first SYNC at which the drive, in operation

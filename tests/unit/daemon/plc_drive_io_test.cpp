@@ -233,6 +233,49 @@ TEST(PlcDriveIo, StaleInputsTakeTheirDefaultsAfterTheMissedTpdoStreak) {
   EXPECT_EQ(p.plc.peek(cam).i, 1);
 }
 
+// A drive whose digital inputs (TPDO2) stop while its position (TPDO1) still comes: not a silent
+// fall-back to the signals' defaults, but the missed-TPDO fault, named as the inputs', and a
+// reset refused until they come again.
+TEST(PlcDriveIo, LostDigitalInputsAloneFaultTheMachineAndBlockTheResetUntilBack) {
+  IoRig p;
+  Rig& r = p.rig;
+  auto job = run_x20(r);
+  ASSERT_EQ(r.loop.status().state, MachineState::kRunning);
+  ASSERT_EQ(p.cfg.safety.missed_tpdo_streak, 3);
+  r.bus.inject_inputs_tpdo_drop(1, -1);
+  r.step(2);
+  EXPECT_EQ(r.loop.status().state, MachineState::kRunning);  // 2 cycles: held, as the position is
+  r.step(1);
+  auto st = r.loop.status();
+  ASSERT_EQ(st.state, MachineState::kFault);
+  EXPECT_EQ(st.cause, FaultCause::kMissedTpdo);
+  EXPECT_EQ(st.fault_axis, 1);
+  EXPECT_EQ(st.fault_detail, static_cast<std::uint8_t>(MissedPdo::kDigitalInputs));
+  EXPECT_EQ(st.fault_value, 3.0);
+  bool logged = false;
+  for (const auto& e : r.events)
+    logged = logged || (e.kind == EventKind::kFault && e.cause == FaultCause::kMissedTpdo &&
+                        e.axis == 1 && e.detail == static_cast<std::uint8_t>(MissedPdo::kDigitalInputs));
+  EXPECT_TRUE(logged);
+
+  r.step(600);  // stopped; the inputs still do not come
+  std::size_t mark = r.events.size();
+  r.loop.post({CommandKind::kReset});
+  r.step(300);  // the reset window passes: refused
+  EXPECT_TRUE(refused(r, CommandKind::kReset, mark));
+  EXPECT_EQ(r.loop.status().state, MachineState::kFault);
+  EXPECT_EQ(r.loop.status().reset_block.cause, FaultCause::kMissedTpdo);
+  EXPECT_EQ(r.loop.status().reset_block.axis, 1);
+
+  r.bus.inject_inputs_tpdo_drop(1, 0);  // back
+  r.step(2);
+  r.loop.post({CommandKind::kReset});
+  r.step(40);
+  EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+  r.step(100);
+  EXPECT_EQ(r.loop.status().state, MachineState::kReady);
+}
+
 TEST(PlcDriveIo, IoNamesTheDriveAndBit) {
   IoRig p;
   p.rig.step(3);
