@@ -257,7 +257,7 @@ ResetBlock SafetySupervisor::reset_block(const Feedback& fb, bool estop_tripped)
   // (a lost position is judged afresh after the reset, as before).
   for (int i = 0; i < axes_; ++i) {
     const auto a = static_cast<std::size_t>(i);
-    if (fb.inputs_missed_streak[a] >= missed_tpdo_streak_)
+    if (fb.inputs_missed_streak[a] >= missed_tpdo_streak_ && fb.missed_streak[a] == 0)
       return {FaultCause::kMissedTpdo, i, fb.bus.axis[a].node_id};
   }
   return {};
