@@ -262,7 +262,7 @@ void SimBus::read(BusFeedback& fb) noexcept {
       if (n > 0) drop_input_tpdos_[a].fetch_sub(1, std::memory_order_relaxed);
       f.digital_inputs_fresh = false;
     }
-    if (f.fresh) di_last_[a] = inputs_at(a, drive_[a].position_mm());
+    if (f.digital_inputs_fresh) di_last_[a] = inputs_at(a, drive_[a].position_mm());
     f.digital_inputs = di_last_[a];
     // Encoder index: a pulse between the previous true position and this one is latched at its
     // exact position (in the reported coordinates; counts with CANopen quantisation).
