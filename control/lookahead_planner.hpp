@@ -216,6 +216,13 @@ class LookaheadPlanner {
     bool after;
   };
   std::vector<Nb> nb_;
+  // decide(): the per-axis direction change of each neighbour (against the chord on the other
+  // side of the vertex), sorted by distance, as a running maximum (acc_cap by binary search).
+  struct DuAt {
+    double d;
+    Eigen::Vector3d du;
+  };
+  std::vector<DuAt> du_at_;
   std::vector<Piece> pieces_;
   std::vector<Pulse> pulses_;
   std::size_t commit_pulses_ = 0;

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <numbers>
 #include <vector>
 
 #include "control/blend_planner.hpp"
@@ -156,4 +158,37 @@ TEST(LookaheadPlanner, TinyAlternatingChordsAreMergedInsideTheTolerance) {
   expect_limits(run_result);
   // 2.7 mm at 10 mm/s: 270 periods plus ramps and the FIR (about 300); unmerged: about 2400.
   EXPECT_LT(run_result.periods, 400);
+}
+
+// CAM output of round pads and curves: chords of 0.15 mm turning ~5.7 degrees each (a circle of
+// radius 1.5 mm, pcb2gcode-multivibrator-clockwise-back), at F9000. The speed the axis limits allow
+// on the circle is about sqrt(a r) = 55 mm/s. The corner cap's fixed-point search stopped at its
+// first lower bound (the cap at the block feed's span), about half of that: 85.4 s on the
+// multivibrator program against LinuxCNC's 49.4 s. The largest speed the window rule allows is
+// now searched (bisection), and P and the limits still hold. Mean speed over 4 turns from rest to
+// rest: 20.1 mm/s before (1879 periods), 43.4 mm/s after (868 periods).
+TEST(LookaheadPlanner, ChordedCircleRunsNearTheSpeedTheAxisLimitsAllow) {
+  const double r = 1.5;
+  const int per_turn = 63;  // chord 0.1496 mm, turn 5.71 degrees
+  const int turns = 4;
+  std::vector<Vector3d> pts;
+  for (int i = 0; i <= per_turn * turns; ++i) {
+    const double a = 2.0 * std::numbers::pi * i / per_turn;
+    pts.emplace_back(r * std::sin(a), r - r * std::cos(a), 0.0);
+  }
+  const Vector3d start = pts.front();
+  std::vector<Block> b;
+  for (std::size_t i = 1; i < pts.size(); ++i)
+    b.push_back(motion(static_cast<int>(i), pts[i - 1], pts[i], 9000.0, false));
+  Block e;
+  e.kind = BlockKind::kEnd;
+  e.line = static_cast<int>(pts.size());
+  b.push_back(e);
+  const PlanRun run_result = run(b, start);
+  expect_limits(run_result);
+  const double path_mm = 2.0 * std::numbers::pi * r * turns;
+  const double mean_mm_s = path_mm / (run_result.periods * 1e-3);
+  std::printf("chorded circle: %.2f mm in %d periods, mean %.1f mm/s\n", path_mm,
+              run_result.periods, mean_mm_s);
+  EXPECT_GT(mean_mm_s, 35.0);
 }
