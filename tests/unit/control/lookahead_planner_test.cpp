@@ -35,6 +35,18 @@ Block motion(int line, const Vector3d& a, const Vector3d& b, double feed, bool r
   return k;
 }
 
+// Feed moves through the points in order (lines 1..n), then the program end.
+std::vector<Block> polyline(const std::vector<Vector3d>& pts, double feed) {
+  std::vector<Block> b;
+  for (std::size_t i = 1; i < pts.size(); ++i)
+    b.push_back(motion(static_cast<int>(i), pts[i - 1], pts[i], feed, false));
+  Block e;
+  e.kind = BlockKind::kEnd;
+  e.line = static_cast<int>(pts.size());
+  b.push_back(e);
+  return b;
+}
+
 struct PlanRun {
   PathMeterResult m;
   bool done = false;
@@ -124,13 +136,7 @@ TEST(LookaheadPlanner, DenseChordsAcrossTheWindowEndAndKeepTheLimits) {
       {74.8495, -214.1102, 0.4064}, {75.1376, -214.1732, 0.4067}, {76.0034, -214.3241, 0.4070},
       {76.2409, -214.4178, 0.4073}, {76.6312, -214.5090, 0.4076}};
   const Vector3d start = pts.front();
-  std::vector<Block> b;
-  for (std::size_t i = 1; i < pts.size(); ++i)
-    b.push_back(motion(static_cast<int>(i), pts[i - 1], pts[i], 4000.0, false));
-  Block e;
-  e.kind = BlockKind::kEnd;
-  e.line = static_cast<int>(pts.size());
-  b.push_back(e);
+  const std::vector<Block> b = polyline(pts, 4000.0);
   expect_limits(run(b, start));
 }
 
@@ -147,13 +153,7 @@ TEST(LookaheadPlanner, TinyAlternatingChordsAreMergedInsideTheTolerance) {
     s += (i % 2 == 0) ? 0.001 : 0.008;
   }
   const Vector3d start = pts.front();
-  std::vector<Block> b;
-  for (std::size_t i = 1; i < pts.size(); ++i)
-    b.push_back(motion(static_cast<int>(i), pts[i - 1], pts[i], 600.0, false));
-  Block e;
-  e.kind = BlockKind::kEnd;
-  e.line = static_cast<int>(pts.size());
-  b.push_back(e);
+  const std::vector<Block> b = polyline(pts, 600.0);
   const PlanRun run_result = run(b, start);
   expect_limits(run_result);
   // 2.7 mm at 10 mm/s: 270 periods plus ramps and the FIR (about 300); unmerged: about 2400.
@@ -177,13 +177,7 @@ TEST(LookaheadPlanner, ChordedCircleRunsNearTheSpeedTheAxisLimitsAllow) {
     pts.emplace_back(r * std::sin(a), r - r * std::cos(a), 0.0);
   }
   const Vector3d start = pts.front();
-  std::vector<Block> b;
-  for (std::size_t i = 1; i < pts.size(); ++i)
-    b.push_back(motion(static_cast<int>(i), pts[i - 1], pts[i], 9000.0, false));
-  Block e;
-  e.kind = BlockKind::kEnd;
-  e.line = static_cast<int>(pts.size());
-  b.push_back(e);
+  const std::vector<Block> b = polyline(pts, 9000.0);
   const PlanRun run_result = run(b, start);
   expect_limits(run_result);
   const double path_mm = 2.0 * std::numbers::pi * r * turns;
