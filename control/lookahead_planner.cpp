@@ -337,19 +337,25 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   // Neighbourhood within the largest half-span (v0 * rr / 2 on each side): per-axis direction
   // ranges and the turning of the other vertices, by distance from this vertex.
   const double span_max = v0 * rr_;
+  // Each neighbour's per-axis direction change goes into du_at_: a chord before the vertex against
+  // the next chord, one after it against the previous chord (see acc_cap below).
+  const Vector3d u_prev = pr.u, u_next = c.u;
   std::vector<Nb>& nb = nb_;
   nb.clear();
+  du_at_.clear();
   for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
     const Chord& q = chord(k);
     const double d = p - (q.s0 + q.len);  // distance from the vertex to q's end
     if (k < id - 1 && d > span_max) break;
-    nb.push_back({std::max(0.0, d), k < id - 1 ? chord(k + 1).turn : 0.0, q.u, false});
+    nb.push_back({std::max(0.0, d), k < id - 1 ? chord(k + 1).turn : 0.0});
+    du_at_.push_back({std::max(0.0, d), (u_next - q.u).cwiseAbs()});
   }
   for (std::int64_t k = id; k < next_id_; ++k) {
     const Chord& q = chord(k);
     const double d = q.s0 - p;
     if (k > id && d > span_max) break;
-    nb.push_back({d, k > id ? q.turn : 0.0, q.u, true});
+    nb.push_back({d, k > id ? q.turn : 0.0});
+    du_at_.push_back({d, (q.u - u_prev).cwiseAbs()});
   }
   (void)final;
   // Per-axis acceleration cap at speed v. The window rule compares command velocities L1 periods
@@ -361,14 +367,8 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   // missed pairs across three short chords: cam_dense_random's chords 945/948 made the window
   // infeasible at 0.0667 mm/period and the repair crawled at 7e-10 mm/period (12 GB of pulses);
   // +-v rr on both sides is safe but counts pairs 2 W apart (trochoidal_chords 1.64x slower).
-  const Vector3d u_prev = pr.u, u_next = c.u;
-  // Each neighbour's direction change, by distance, as a running maximum: acc_cap(v) looks up the
-  // neighbours within v rr in O(log n) (the fixed-point search below calls it ~15 times).
-  du_at_.clear();
-  for (const auto& n : nb) {
-    du_at_.push_back({n.d, n.after ? Vector3d((n.u - u_prev).cwiseAbs())
-                                   : Vector3d((u_next - n.u).cwiseAbs())});
-  }
+  // The direction changes by distance, as a running maximum: acc_cap(v) looks up the neighbours
+  // within v rr in O(log n) (the fixed-point search below calls it ~15 times).
   std::sort(du_at_.begin(), du_at_.end(), [](const DuAt& a, const DuAt& b) { return a.d < b.d; });
   for (std::size_t k = 1; k < du_at_.size(); ++k) {
     du_at_[k].du = du_at_[k].du.cwiseMax(du_at_[k - 1].du);

@@ -212,12 +212,10 @@ class LookaheadPlanner {
   struct Nb {
     double d;     // distance from the vertex being decided, mm
     double turn;  // turning angle of the vertex there, rad
-    Eigen::Vector3d u;
-    bool after;
   };
   std::vector<Nb> nb_;
   // decide(): the per-axis direction change of each neighbour (against the chord on the other
-  // side of the vertex), sorted by distance, as a running maximum (acc_cap by binary search).
+  // side of the vertex) at its distance; sorted by distance as a running maximum.
   struct DuAt {
     double d;
     Eigen::Vector3d du;

@@ -258,7 +258,8 @@ TEST(PlcDriveIo, LostDigitalInputsAloneFaultTheMachineAndBlockTheResetUntilBack)
     if (e.kind == EventKind::kFault && e.cause == FaultCause::kMissedTpdo && e.axis == 1 &&
         e.detail == static_cast<std::uint8_t>(MissedPdo::kDigitalInputs))
       logged = describe(e);
-  EXPECT_NE(logged.find("3 missed TPDOs in a row (0x60FD digital inputs"), std::string::npos) << logged;
+  EXPECT_NE(logged.find("3 missed TPDOs in a row (0x60FD digital inputs"), std::string::npos)
+      << logged;
 
   r.step(600);  // stopped; the inputs still do not come
   std::size_t mark = r.events.size();
@@ -269,7 +270,8 @@ TEST(PlcDriveIo, LostDigitalInputsAloneFaultTheMachineAndBlockTheResetUntilBack)
   EXPECT_EQ(r.loop.status().reset_block.cause, FaultCause::kMissedTpdo);
   EXPECT_EQ(r.loop.status().reset_block.axis, 1);
   const std::string why = describe(r.loop.status().reset_block);
-  EXPECT_NE(why.find("axis 1 still does not send its 0x60FD digital inputs"), std::string::npos) << why;
+  EXPECT_NE(why.find("axis 1 still does not send its 0x60FD digital inputs"), std::string::npos)
+      << why;
 
   r.bus.inject_inputs_tpdo_drop(1, 0);  // back
   r.step(2);
