@@ -816,6 +816,7 @@ bool LookaheadPlanner::verify(const VerifyState& vs0, std::int64_t t_commit, Ver
   };
   if (t_commit <= vs0.t) snapshot(vs0.t, at_commit);
   std::int64_t last_chord = seq_.empty() ? committed_.chord : seq_.back().chord;
+  std::int64_t dist_lo = 0, dist_hi = -1;  // chords with a distance in dist_prev_
   for (std::int64_t t = vs0.t + 1; t <= t_end; ++t) {
     const double td = static_cast<double>(t);
     while (hi < seq_.size() && seq_[hi].t0 < td) ++hi;
@@ -847,11 +848,16 @@ bool LookaheadPlanner::verify(const VerifyState& vs0, std::int64_t t_commit, Ver
     umax = std::min(umax, next_id_ - 1);
     if (umax > umin) {
       // Path error of the output chord [y_prev, y] against the programmed chords in motion.
+      // A chord checked in the previous period has its distance to y_prev from then.
       double a0 = kInf, a1 = kInf, b0 = kInf, b1 = kInf, eps = kInf;
+      dist_now_.resize(static_cast<std::size_t>(umax - umin + 1));
       for (std::int64_t k = umin; k <= umax; ++k) {
         const Chord& c = chord(k);
-        const double d0 = distance_point_segment(y_prev, c.a, c.b);
+        const double d0 = k >= dist_lo && k <= dist_hi
+                              ? dist_prev_[static_cast<std::size_t>(k - dist_lo)]
+                              : distance_point_segment(y_prev, c.a, c.b);
         const double d1 = distance_point_segment(y, c.a, c.b);
+        dist_now_[static_cast<std::size_t>(k - umin)] = d1;
         eps = std::min(eps, c.eps);
         if (d0 < a0) {
           a0 = d0;
@@ -862,6 +868,9 @@ bool LookaheadPlanner::verify(const VerifyState& vs0, std::int64_t t_commit, Ver
           b0 = d0;
         }
       }
+      dist_prev_.swap(dist_now_);
+      dist_lo = umin;
+      dist_hi = umax;
       const double e = chord_bound(a0, a1, b0, b1);
       if (e > eps) {
         fail.kind = Failure::Kind::kSample;
@@ -883,6 +892,8 @@ bool LookaheadPlanner::verify(const VerifyState& vs0, std::int64_t t_commit, Ver
           it->second = std::min(it->second, d);
         }
       }
+    } else {
+      dist_hi = dist_lo - 1;  // no distances from this period
     }
     // Vertices the output window has left.
     for (std::size_t i = 0; i < open.size();) {

@@ -233,6 +233,9 @@ class LookaheadPlanner {
     Eigen::Vector3d p0, p1, d;  // d = p1 - p0
   };
   std::vector<PulseGeo> seq_geo_;
+  // verify(): each chord's distance to the previous period's output point, and this period's
+  // (the next period's y_prev is this period's y: the distance is reused, not recomputed).
+  std::vector<double> dist_prev_, dist_now_;
 
   std::deque<PlannedSegment> out_;
   std::vector<std::string> messages_;
