@@ -6,8 +6,7 @@
 # and runs them there.
 # --o3-unit also builds the unit tests in CMake's Release build type (-O3: preset ci-o3 with
 # --preset ci, else release-o3) and runs them there: g++ 12 -O3 once miscompiled code that
-# passed at -O2 (issue 17). Both build only the unit-test programs (target tests_unit), at nice 19
-# in the background from the HIL step on, and run their tests once the main preset's are done.
+# passed at -O2 (issue 17). Both build only the unit-test programs (target tests_unit).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 preset=release
@@ -73,54 +72,6 @@ echo "== unit + sim tests ($preset) =="
 run_step "unit + sim tests ($preset)" "build/$preset" \
   ctest --test-dir "build/$preset" -LE "$exclude" --output-on-failure -j "$(nproc)"
 
-# The unit-test builds of the other build types (--dev-unit, --o3-unit) start now, at nice 19,
-# beside the HIL suite: User-Mode Linux keeps about one of the two cores busy (measured: 54 % idle
-# over the suite), and niced compiles take only the CPU the tests leave. The HIL tests run in
-# lockstep simulation and never assert wall-clock time. Each build's output goes to its own log,
-# shown when the build fails; "build (P) took N s" counts from this start.
-dev=dev
-[ "$preset" = ci ] && dev=ci-dev
-o3=release-o3
-[ "$preset" = ci ] && o3=ci-o3
-extra=()
-[ "$dev_unit" = 1 ] && extra+=("$dev")
-[ "$o3_unit" = 1 ] && extra+=("$o3")
-extra_dir=$(mktemp -d "${TMPDIR:-/tmp}/contour-test-builds.XXXXXX")
-extra_pid=""
-if [ ${#extra[@]} -gt 0 ]; then
-  (
-    for p in "${extra[@]}"; do
-      t=$(date +%s)
-      rc=0
-      nice -n 19 tools/build.sh "$p" tests_unit > "$extra_dir/$p.log" 2>&1 || rc=$?
-      echo "$rc $(( $(date +%s) - t ))" > "$extra_dir/$p.status"
-    done
-  ) &
-  extra_pid=$!
-fi
-# wait_build P: waits for the background build of preset P; returns its status, notes its time,
-# and prints the end of its log when it failed.
-wait_build() {
-  local p=$1 rc secs
-  while [ ! -e "$extra_dir/$p.status" ]; do
-    if ! kill -0 "$extra_pid" 2>/dev/null && [ ! -e "$extra_dir/$p.status" ]; then
-      note "FAILED: $p unit-test build (the background build ended without a status)"
-      status=1
-      return 1
-    fi
-    sleep 2
-  done
-  read -r rc secs < "$extra_dir/$p.status"
-  if [ "$rc" != 0 ]; then
-    echo "== $p unit-test build failed (exit $rc): last 80 lines =="
-    tail -n 80 "$extra_dir/$p.log"
-    note "FAILED: $p unit-test build (exit $rc)"
-    status=1
-    return 1
-  fi
-  note "$p unit-test build took $secs s (niced, beside the tests before it)"
-}
-
 if [ "$hil" = 1 ]; then
   echo "== HIL tests ($preset) under tools/with-vcan =="
   hil_label="hil"
@@ -141,22 +92,26 @@ fi
 if [ "$dev_unit" = 1 ]; then
   # With --preset ci: the ci-dev preset (dev with line tables only, -g1: enough for ASan's
   # reports and a quarter less compile time than dev's full -g).
+  dev=dev
+  [ "$preset" = ci ] && dev=ci-dev
   echo "== unit tests, ASan + UBSan ($dev preset) =="
-  if wait_build "$dev"; then
-    run_step "$dev unit tests (ASan + UBSan)" "build/$dev" \
-      env ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
-      ctest --test-dir "build/$dev" -L unit --output-on-failure -j "$(nproc)"
-  fi
+  t=$(date +%s)
+  tools/build.sh "$dev" tests_unit
+  note "$dev unit-test build took $(( $(date +%s) - t )) s"
+  run_step "$dev unit tests (ASan + UBSan)" "build/$dev" \
+    env ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+    ctest --test-dir "build/$dev" -L unit --output-on-failure -j "$(nproc)"
 fi
 
 if [ "$o3_unit" = 1 ]; then
+  o3=release-o3
+  [ "$preset" = ci ] && o3=ci-o3
   echo "== unit tests, Release -O3 ($o3 preset) =="
-  if wait_build "$o3"; then
-    run_step "$o3 unit tests" "build/$o3" ctest --test-dir "build/$o3" -L unit --output-on-failure -j "$(nproc)"
-  fi
+  t=$(date +%s)
+  tools/build.sh "$o3" tests_unit
+  note "$o3 unit-test build took $(( $(date +%s) - t )) s"
+  run_step "$o3 unit tests" "build/$o3" ctest --test-dir "build/$o3" -L unit --output-on-failure -j "$(nproc)"
 fi
-[ -n "$extra_pid" ] && wait "$extra_pid" || true
-rm -rf "$extra_dir"
 
 for entry in "${failure_logs[@]}"; do
   echo "== what the failed tests of ${entry%%|*} printed (last 60 lines) =="
