@@ -118,9 +118,13 @@ done
 echo "whole servo cycle (bench_loop source of this checkout), reference ${revs[0]}:"
 printf '%-14s %-12s %12s %8s %14s %8s\n' commit sha "instr/cycle" ratio "CPU ns (med)" ratio
 ref_ipc=${ipc[0]:-}
-ref_ns=$(awk '$1 == 0 { print $2 }' "$tmp/wall" | sort -g | awk '{ a[NR] = $1 } END { print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2 }')
+median_ns() {  # commit index -> median of its rounds
+  awk -v i="$1" '$1 == i { print $2 }' "$tmp/wall" | sort -g |
+    awk '{ a[NR] = $1 } END { print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2 }'
+}
+ref_ns=$(median_ns 0)
 for i in "${!revs[@]}"; do
-  ns=$(awk -v i="$i" '$1 == i { print $2 }' "$tmp/wall" | sort -g | awk '{ a[NR] = $1 } END { print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2 }')
+  ns=$(median_ns "$i")
   all=$(awk -v i="$i" '$1 == i { printf "%s%.0f", (n++ ? " " : ""), $2 }' "$tmp/wall")
   ic=${ipc[$i]:-}
   ir=$([ -n "$ic" ] && awk -v a="$ic" -v b="$ref_ipc" 'BEGIN { printf "%.3f", a / b }' || echo -)
