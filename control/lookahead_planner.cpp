@@ -21,6 +21,8 @@ constexpr double kEpsMargin = 0.99;  // verification tolerance / programmed tole
 constexpr double kMergeShare = 0.04;
 constexpr double kMergeShortPeriods = 2.0;
 constexpr std::size_t kMergeMax = 256;
+// Out-and-back spikes up to this share of P are dropped (try_drop_spike).
+constexpr double kSpikeShare = 0.4;
 
 // Upper bound of max over [0,1] of min(d_a, d_b) on a chord, given both convex distance
 // functions at its two ends (each is below its chord interpolation).
@@ -56,6 +58,7 @@ LookaheadPlanner::LookaheadPlanner(const PlannerParams& p, const Vector3d& start
     vmax_[i] = p.max_velocity_mm_min[i] / 60.0 * T_;
   }
   rr_ = static_cast<double>(L_ + 1);
+  rr_in_ = 0.5 * L_ + 2.0;
   delta_ = static_cast<double>(L1_ + 1) / kFine;
   // Filter moments (periods) and the sharp-corner displacement alpha(g): at the middle of the
   // overlap t* = (L - 1 + g) / 2 the output is vertex + v alpha (u2 - u1) (symmetric filter).
@@ -165,7 +168,8 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
     ++stats_.dropped_zero_length;
     return;
   }
-  if (chord_err == 0.0 && try_merge(b, e)) return;
+  if (chord_err == 0.0 && spike_mm_ == 0.0 && try_drop_spike(b, e)) return;
+  if (chord_err == 0.0 && spike_mm_ == 0.0 && try_merge(b, e)) return;
   Chord c;
   c.id = next_id_++;
   c.a = a;
@@ -182,7 +186,8 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
   // Verified with the 1 % margin kTrue holds (overlap_planner.hpp): the meter found 50.19 um at
   // a reversal of pcb2gcode-multivibrator-clockwise-back (P = 50 um) that this verification had
   // passed at <= 50 um (a difference between the verification's output and the meter's).
-  c.eps = c.mode == BlendMode::kLimited ? kEpsMargin * (c.tol - chord_err) : kInf;
+  c.eps = c.mode == BlendMode::kLimited ? kEpsMargin * (c.tol - chord_err - spike_mm_) : kInf;
+  spike_mm_ = 0.0;
   c.spindle = b.spindle;
   c.rpm = b.spindle_rpm;
   c.mist = b.mist;
@@ -206,6 +211,39 @@ void LookaheadPlanner::add_chord(const Block& b, const Vector3d& a, const Vector
   ++stats_.moves;
   chords_.push_back(c);
   stats_.max_window = std::max(stats_.max_window, chords_.size());
+}
+
+// Why: pcb2gcode's isolation paths go out and back along the same line by 14-16 um at 177 of the
+// vertices of multivibrator-clockwise-back (two 180-degree reversals each, planned as near-stops).
+// The tip T of such a spike lies h from the vertex V it returns to; the spike is dropped and the
+// next chord's verification tolerance (and so V's vertex tolerance) shrinks by h, so the output
+// passes within eps - h of V and within eps of T. At a stop (a barrier, the program end) the
+// output rests at V itself.
+bool LookaheadPlanner::try_drop_spike(const Block& b, const Vector3d& e) {
+  if (chords_.size() < 2 || start_from_rest_ || force_stop_next_) return false;
+  const Chord& sp = chords_.back();
+  const Chord& pr = chords_[chords_.size() - 2];
+  const BlendMode mode = p_.force_mode.value_or(b.blend);
+  if (sp.decided || sp.stop || sp.id <= committed_.chord || !sp.dropped.empty() ||
+      mode != BlendMode::kLimited || sp.mode != BlendMode::kLimited || pr.id + 1 != sp.id ||
+      (pr.b - sp.a).norm() > 1e-9 || sp.rapid != b.rapid || sp.spindle != b.spindle ||
+      sp.rpm != b.spindle_rpm || sp.mist != b.mist || sp.flood != b.flood || sp.tool != b.tool)
+    return false;
+  const double tol = p_.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
+                                                                          : p_.default_tolerance_mm);
+  if (tol != sp.tol || !std::isfinite(sp.eps)) return false;
+  // Back to where the spike started, and short against the tolerance.
+  if ((e - sp.a).norm() > 1e-9 || sp.len > kSpikeShare * tol) return false;
+  for (const auto& q : fallback_)
+    if (q.chord >= sp.id) return false;
+  for (const auto& q : vcommitted_.tail)
+    if (q.chord >= sp.id) return false;
+  spike_mm_ = sp.len;
+  path_mm_ = sp.s0;
+  --next_id_;
+  chords_.pop_back();
+  ++stats_.moves;
+  return true;
 }
 
 void LookaheadPlanner::set_limits(Chord& c, int line) {
@@ -268,7 +306,7 @@ bool LookaheadPlanner::try_merge(const Block& b, const Vector3d& e) {
     if (distance_point_segment(q, pr.a, e) > dmax) return false;
   // Merge.
   pr.dropped.push_back(pr.b);
-  if (pr.dropped.size() == 1) pr.eps = kEpsMargin * pr.tol - dmax;
+  if (pr.dropped.size() == 1) pr.eps -= dmax;  // (on top of a dropped spike's share)
   pr.b = e;
   pr.u = d / len;
   pr.len = len;
@@ -318,6 +356,8 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   c.C_acc = kInf;
   c.gap = 0;
   c.r = 0.0;
+  c.C_out = kInf;
+  c.short_regions = false;
   c.model_e = 0.0;
   if (c.stop) {
     c.C = 0.0;
@@ -434,8 +474,63 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     return lo;
   };
   const double aq = dv0 * kFine / ((kFine + 1.0) * (L1_ + 1.0));
+  // Short regions. The tolerance model only needs the cap over the window of the output nearest
+  // the vertex: +-cc rr_in (err() counts the other vertices within cc rr / 2). The window rule
+  // across the vertex needs every command velocity w of the L1 periods before it to allow cc on
+  // the chords after it that the L1 periods after it reach, |w_i - cc ua_i| <= A_i (then cc lies in
+  // the forward pass's window interval there; the rise after the inner region is the forward
+  // pass's own): a cap cb over the rr periods before the vertex (cb rr of path, so the L1 periods
+  // before it lie on the chords within cb rr). Returns 0 where no cap cb >= cc does it.
+  auto cap_before = [&](double cc, int g) {
+    const double v_before = std::min(pr.cap, pr.repair_cap);
+    const double v_after = std::min(c.cap, c.repair_cap);
+    const double reach_a = cc * rr_in_ + v_after * (rr_ - rr_in_);
+    const double reach_b = v_before * rr_;
+    constexpr std::size_t kMaxChords = 48;
+    u_after_.clear();
+    u_before_.clear();
+    for (std::int64_t k = id; k < next_id_; ++k) {
+      const Chord& q = chord(k);
+      if (k > id && q.s0 - p > reach_a) break;
+      if (u_after_.size() == kMaxChords) return 0.0;
+      u_after_.push_back(q.u);
+    }
+    for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
+      const Chord& q = chord(k);
+      if (k < id - 1 && p - (q.s0 + q.len) > reach_b) break;
+      if (u_before_.size() == kMaxChords) return 0.0;
+      u_before_.push_back(q.u);
+    }
+    double cb = v_before;
+    for (int i = 0; i < 3; ++i) {
+      if (!std::isfinite(A_[i])) continue;
+      const double lim = A_[i] * (1.0 - 1e-6);
+      for (const Vector3d& ua : u_after_) {
+        const double b = cc * ua[i];
+        if (std::abs(b) > lim) return 0.0;
+        for (const Vector3d& ub : u_before_) {
+          const double u1 = ub[i];
+          if (std::abs(u1) < 1e-15) continue;
+          // lo <= v u1 <= hi with [lo, hi] = [b - lim, b + lim] (and [-lim, lim] across a rest).
+          double lo = b - lim, hi = b + lim;
+          if (g > 0) {
+            lo = std::max(lo, -lim);
+            hi = std::min(hi, lim);
+          }
+          if ((u1 > 0 ? lo / u1 : hi / u1) > 0.0) return 0.0;  // braking to rest would not fit
+          cb = std::min(cb, u1 > 0 ? hi / u1 : lo / u1);
+        }
+      }
+    }
+    return cb >= cc ? cb : 0.0;
+  };
   auto cost = [&](double cc, int g) {
     double pen = 2.0 * rr_ * (1.0 - cc / v0);
+    const double cb = cap_before(cc, g);
+    if (cb > 0.0) {
+      pen = 2.0 * rr_in_ * (1.0 - cc / v0);
+      if (cb < v0) pen += (rr_ - rr_in_) * (1.0 - cb / v0);
+    }
     if (std::isfinite(aq) && aq > 0.0) pen += (v0 - cc) * (v0 - cc) / (aq * v0);
     return g + pen;
   };
@@ -480,7 +575,11 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   } else {
     c.C = best_c;
     c.gap = best_g;
-    c.r = best_c * rr_;
+    const double cb = cap_before(best_c, best_g);
+    c.short_regions = cb > 0.0;
+    c.C_out = cb > best_c && cb < std::min(pr.cap, pr.repair_cap) ? cb : kInf;
+    c.r = !c.short_regions ? best_c * rr_
+                           : std::max(best_c * rr_in_, std::isfinite(c.C_out) ? c.C_out * rr_ : 0.0);
     c.model_e = err(best_c, best_g);
   }
   c.decided = true;
@@ -498,10 +597,15 @@ void LookaheadPlanner::build_pieces(double s_from, double s_stop, bool final) {
   ev.clear();
   for (const auto& c : chords_) {
     if (!c.decided || c.stop || !std::isfinite(c.C)) continue;
-    const double lo = c.s0 - c.r, hi = c.s0 + c.r;
-    if (hi <= s_from || lo >= s_stop) continue;
-    ev.push_back({lo, true, c.C, c.C_acc});
-    ev.push_back({hi, false, c.C, c.C_acc});
+    if (c.s0 + c.r <= s_from || c.s0 - c.r >= s_stop) continue;
+    const double ri = c.C * (c.short_regions ? rr_in_ : rr_);
+    ev.push_back({c.s0 - ri, true, c.C, c.C_acc});
+    ev.push_back({c.s0 + ri, false, c.C, c.C_acc});
+    if (c.short_regions && std::isfinite(c.C_out)) {
+      // The window rule's cap, not a curve's: it takes nothing from the braking there.
+      ev.push_back({c.s0 - c.C_out * rr_, true, c.C_out, kInf});
+      ev.push_back({c.s0, false, c.C_out, kInf});
+    }
   }
   std::sort(ev.begin(), ev.end(), [](const Ev& x, const Ev& y) { return x.pos < y.pos; });
   std::multiset<double> caps, caccs;
@@ -706,10 +810,24 @@ bool LookaheadPlanner::forward(const State& start, double s_stop, double s_commi
     // Braking profile: the speed must be one the look-ahead can still brake from at the end of
     // a fine step (the largest fixed point of v = sqrt(Q(pos + v delta)), from above).
     double vb = v;
+    double v_late = -1.0;  // a speed known to brake too late
     for (int it = 0; it < 6; ++it) {
       const double q = std::sqrt(std::max(0.0, q_at(pos + vb * delta_, pi)));
       if (q >= vb) break;
+      v_late = vb;
       vb = q;
+    }
+    // The iteration from above can stop well below the largest fixed point: where the profile is
+    // steep, the end of a fine step at the higher speed lands deep in the braking into a slow
+    // vertex. The speeds with v <= sqrt(Q(pos + v delta)) are an interval [0, v*] (q_at takes the
+    // minimum over the pieces passed, so it does not increase along the path): a bisection finds v*.
+    if (v_late > 0.0) {
+      double ok = std::sqrt(std::max(0.0, q_at(pos + vb * delta_, pi))) >= vb ? vb : 0.0;
+      for (int it = 0; it < 12 && v_late - ok > 1e-4 * v_late; ++it) {
+        const double mid = 0.5 * (ok + v_late);
+        if (std::sqrt(std::max(0.0, q_at(pos + mid * delta_, pi))) >= mid) ok = mid; else v_late = mid;
+      }
+      vb = ok;
     }
     const bool braking = vb < v;
     v = std::min(v, vb);
@@ -1134,6 +1252,7 @@ void LookaheadPlanner::plan(bool final) {
 
 void LookaheadPlanner::barrier(SegmentKind kind, const std::string& msg, const Block& b,
                                double extra_s) {
+  spike_mm_ = 0.0;  // the output rests at the vertex a dropped spike returned to
   plan(true);
   // The output has settled L - 1 periods after the last command.
   std::int64_t t_stop = static_cast<std::int64_t>(std::ceil(earliest_tau_));

@@ -14,7 +14,9 @@
 // (Tajima & Sencer's FIR segment timing, generalised to per-axis limits and a look-ahead):
 //  - speed changes are staircases: up by at most A per window (the greedy maximum), down as a
 //    fine ramp that follows the braking profile of the look-ahead (at most A per window);
-//  - a corner or curve gets a speed cap C over a region of (L + 1) periods on each side, from
+//  - a corner or curve gets a speed cap C over a region of (L + 1) periods on each side (an
+//    isolated vertex: over +-(L/2 + 2) periods, the window of the output nearest it, with a
+//    window-rule cap over the L + 1 periods before it, see decide()), from
 //    the per-axis velocity change across the window (accel) and from the FIR's blend error
 //    (tolerance: sharp-corner displacement 2 alpha_g C sin(theta/2), alpha_g from the filter
 //    taps, plus the moving-average error of curves kappa C^2 sigma^2 / 2); sharp corners may
@@ -94,7 +96,9 @@ class LookaheadPlanner {
     double C = kInf;         // speed cap around the vertex, mm/period
     double C_acc = kInf;     // the pure per-axis acceleration cap (no margin), mm/period
     int gap = 0;             // rest at the vertex, periods
-    double r = 0.0;          // region half-length, mm
+    double r = 0.0;          // reach of its regions, mm
+    bool short_regions = false;  // C over +-C rr_in only, C_out over the rr periods before it
+    double C_out = kInf;     // window-rule cap over C_out rr before the vertex, mm/period
     double model_e = 0.0;    // modelled error at the decision, mm
     bool reported = false;
     // Collinear merging (try_merge): programmed vertices inside this chord, the block feed and
@@ -151,6 +155,9 @@ class LookaheadPlanner {
   // the last chord is not planned yet, and every programmed vertex inside stays within
   // kMergeShare * P of the merged chord (whose verification tolerance shrinks by that much).
   bool try_merge(const Block& b, const Eigen::Vector3d& e);
+  // Drops the last chord when the line b (from its end to e) returns to its start and it is
+  // shorter than kSpikeShare P; the next chord's tolerance shrinks by its length (spike_mm_).
+  bool try_drop_spike(const Block& b, const Eigen::Vector3d& e);
   void set_limits(Chord& c, int line);
   void barrier(SegmentKind kind, const std::string& msg, const Block& b, double extra_s);
   void maybe_plan();
@@ -185,7 +192,8 @@ class LookaheadPlanner {
   double T_ = 0.001;
   Eigen::Vector3d A_;            // window rule per axis, mm/period
   Eigen::Vector3d vmax_;         // mm/period
-  double rr_ = 2.0;              // region half-length in periods (L + 1)
+  double rr_ = 2.0;              // acceleration region half-length in periods (L + 1)
+  double rr_in_ = 2.0;           // corner cap region half-length in periods (L / 2 + 2)
   double delta_ = 1.0;           // fine ramp step, periods
   double sigma2_ = 0.0;          // filter variance, periods^2
   std::vector<double> alpha_;    // sharp-corner displacement per unit speed vs gap, periods
@@ -203,6 +211,7 @@ class LookaheadPlanner {
   VerifyState vfallback_end_;
   bool start_from_rest_ = true;
   bool force_stop_next_ = false;
+  double spike_mm_ = 0.0;        // a spike dropped at the end of the last chord (try_drop_spike)
   double vmax_seen_ = 0.0, dvmin_seen_ = kInf, dvmax_seen_ = 0.0;  // over every chord so far
   double earliest_tau_ = 0.0;
   SpindleDir synced_spindle_ = SpindleDir::kOff;
@@ -221,6 +230,9 @@ class LookaheadPlanner {
     Eigen::Vector3d du;
   };
   std::vector<DuAt> du_at_;
+  // decide(): the directions of the chords before and after the vertex the short regions' window
+  // rule covers (cap_before).
+  std::vector<Eigen::Vector3d> u_before_, u_after_;
   std::vector<Piece> pieces_;
   std::vector<Pulse> pulses_;
   std::size_t commit_pulses_ = 0;

@@ -186,3 +186,32 @@ TEST(LookaheadPlanner, ChordedCircleRunsNearTheSpeedTheAxisLimitsAllow) {
               run_result.periods, mean_mm_s);
   EXPECT_GT(mean_mm_s, 35.0);
 }
+
+// An isolated sharp corner holds its tolerance cap only over the window of the output nearest the
+// vertex (+-C (L/2 + 2) periods); the window rule across it caps the L1 periods before it (the
+// chord before it alone), not +-C (L + 1) periods on both sides. A square and a zigzag with 90 and
+// 166 degree turns at 100 mm/s: 1898 periods with the symmetric regions, 1837 with the short ones.
+TEST(LookaheadPlanner, IsolatedSharpCornersHoldTheirCapOnlyOverTheOutputWindow) {
+  const std::vector<Vector3d> pts = {{0, 0, 0},  {20, 0, 0}, {20, 20, 0}, {0, 20, 0},
+                                     {0, 0, 0},  {20, 5, 0}, {0, 10, 0},  {20, 10, 0}};
+  const PlanRun r = run(polyline(pts, 6000.0), pts.front());
+  expect_limits(r);
+  EXPECT_LE(r.periods, 1860);
+  std::printf("square + zigzag at 100 mm/s: %d periods\n", r.periods);
+}
+
+// Out-and-back spikes shorter than 0.4 P (pcb2gcode: 14-16 um at 177 vertices of
+// multivibrator-clockwise-back) are dropped; the vertex they return to is held within P minus the
+// spike's length, so the spike's tip stays within P (the meter checks every programmed vertex,
+// the tips included). 768 periods when the spikes were planned as two reversals each, 685 now.
+TEST(LookaheadPlanner, ShortOutAndBackSpikesAreDroppedInsideTheTolerance) {
+  const std::vector<Vector3d> pts = {{0, 0, 0},      {10, 0, 0},  {10.01, -0.015, 0},
+                                     {10, 0, 0},     {10, 10, 0}, {10.012, 10.012, 0},
+                                     {10, 10, 0},    {0, 10, 0}};
+  const PlanRun r = run(polyline(pts, 3000.0), pts.front());
+  expect_limits(r);
+  EXPECT_GE(r.m.vertices, 6);  // the two tips among them
+  EXPECT_LE(r.periods, 700);
+  std::printf("two spikes of 18 and 17 um: %d periods, %lld vertices, vertex error %.1f um\n",
+              r.periods, static_cast<long long>(r.m.vertices), r.m.max_vertex_error_mm * 1000.0);
+}
