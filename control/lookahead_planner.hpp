@@ -197,7 +197,7 @@ class LookaheadPlanner {
   double delta_ = 1.0;           // fine ramp step, periods
   double sigma2_ = 0.0;          // filter variance, periods^2
   std::vector<double> alpha_;    // sharp-corner displacement per unit speed vs gap, periods
-  double acc_margin_ = 0.95;     // share of the pure acceleration cap used on curves
+  double acc_margin_ = 0.98;     // share of the pure acceleration cap used on curves
 
   Eigen::Vector3d pos_;          // programmed position (end of the last chord pushed)
   double path_mm_ = 0.0;
