@@ -13,7 +13,7 @@ namespace contour::control {
 namespace {
 using Eigen::Vector3d;
 constexpr double kTiny = 1e-12;  // mm: positions closer than this are the same
-constexpr int kFine = 4;          // fine braking steps per window
+constexpr int kFine = 8;          // fine braking steps per window
 constexpr double kEpsMargin = 0.99;  // verification tolerance / programmed tolerance
 // Collinear merging: a programmed vertex may be merged over when it lies within this share of P
 // of the merged chord; chords are merged while one of the two is shorter than kMergeShortPeriods
