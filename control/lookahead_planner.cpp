@@ -481,45 +481,69 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   // the forward pass's window interval there; the rise after the inner region is the forward
   // pass's own): a cap cb over the rr periods before the vertex (cb rr of path, so the L1 periods
   // before it lie on the chords within cb rr). Returns 0 where no cap cb >= cc does it.
-  auto cap_before = [&](double cc, int g) {
-    const double v_before = std::min(pr.cap, pr.repair_cap);
-    const double v_after = std::min(c.cap, c.repair_cap);
-    const double reach_a = cc * rr_in_ + v_after * (rr_ - rr_in_);
-    const double reach_b = v_before * rr_;
-    constexpr std::size_t kMaxChords = 48;
-    u_after_.clear();
-    u_before_.clear();
-    for (std::int64_t k = id; k < next_id_; ++k) {
-      const Chord& q = chord(k);
-      if (k > id && q.s0 - p > reach_a) break;
-      if (u_after_.size() == kMaxChords) return 0.0;
-      u_after_.push_back(q.u);
-    }
+  // The directions it needs are collected once per decision: per axis the largest positive and
+  // the largest negative component of the chords before the vertex (within v_before rr, as cb <=
+  // v_before), and the running min / max of the chords after it by distance (within v_after rr).
+  // With |cc ua_i| <= lim every pair's bound is (cc ua_i + lim) / ub_i (ub_i > 0) or
+  // (lim - cc ua_i) / |ub_i| (ub_i < 0), so the smallest is that of the extreme components.
+  constexpr std::size_t kMaxChords = 48;
+  const double v_before = std::min(pr.cap, pr.repair_cap);
+  const double v_after = std::min(c.cap, c.repair_cap);
+  Vector3d ub_pos = Vector3d::Zero(), ub_neg = Vector3d::Zero();
+  bool before_ok = true;
+  {
+    std::size_t n = 0;
     for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
       const Chord& q = chord(k);
-      if (k < id - 1 && p - (q.s0 + q.len) > reach_b) break;
-      if (u_before_.size() == kMaxChords) return 0.0;
-      u_before_.push_back(q.u);
+      if (k < id - 1 && p - (q.s0 + q.len) > v_before * rr_) break;
+      if (++n > kMaxChords) {
+        before_ok = false;
+        break;
+      }
+      ub_pos = ub_pos.cwiseMax(q.u);
+      ub_neg = ub_neg.cwiseMax(-q.u);
     }
+  }
+  ua_at_.clear();
+  double ua_overflow_d = kInf;  // the distance of the first chord after the vertex past kMaxChords
+  for (std::int64_t k = id; k < next_id_; ++k) {
+    const Chord& q = chord(k);
+    const double d = k == id ? 0.0 : q.s0 - p;
+    if (k > id && d > v_after * rr_) break;
+    if (ua_at_.size() == kMaxChords) {
+      ua_overflow_d = d;
+      break;
+    }
+    UaAt e{d, q.u, q.u};
+    if (!ua_at_.empty()) {
+      e.mn = e.mn.cwiseMin(ua_at_.back().mn);
+      e.mx = e.mx.cwiseMax(ua_at_.back().mx);
+    }
+    ua_at_.push_back(e);
+  }
+  auto cap_before = [&](double cc, int g) {
+    if (!before_ok) return 0.0;
+    const double reach_a = cc * rr_in_ + v_after * (rr_ - rr_in_);
+    if (reach_a >= ua_overflow_d) return 0.0;
+    std::size_t m = 0;  // the chords after the vertex the L1 periods after it reach: [0, m]
+    while (m + 1 < ua_at_.size() && ua_at_[m + 1].d <= reach_a) ++m;
+    const Vector3d& mn = ua_at_[m].mn;
+    const Vector3d& mx = ua_at_[m].mx;
     double cb = v_before;
     for (int i = 0; i < 3; ++i) {
       if (!std::isfinite(A_[i])) continue;
       const double lim = A_[i] * (1.0 - 1e-6);
-      for (const Vector3d& ua : u_after_) {
-        const double b = cc * ua[i];
-        if (std::abs(b) > lim) return 0.0;
-        for (const Vector3d& ub : u_before_) {
-          const double u1 = ub[i];
-          if (std::abs(u1) < 1e-15) continue;
-          // lo <= v u1 <= hi with [lo, hi] = [b - lim, b + lim] (and [-lim, lim] across a rest).
-          double lo = b - lim, hi = b + lim;
-          if (g > 0) {
-            lo = std::max(lo, -lim);
-            hi = std::min(hi, lim);
-          }
-          if ((u1 > 0 ? lo / u1 : hi / u1) > 0.0) return 0.0;  // braking to rest would not fit
-          cb = std::min(cb, u1 > 0 ? hi / u1 : lo / u1);
-        }
+      if (std::abs(cc * mn[i]) > lim || std::abs(cc * mx[i]) > lim) return 0.0;
+      // [lo, hi] = [b - lim, b + lim] for v ub_i (and within [-lim, lim] across a rest).
+      if (ub_pos[i] > 1e-15) {
+        double hi = cc * mn[i] + lim;
+        if (g > 0) hi = std::min(hi, lim);
+        cb = std::min(cb, hi / ub_pos[i]);
+      }
+      if (ub_neg[i] > 1e-15) {
+        double lo = cc * mx[i] - lim;
+        if (g > 0) lo = std::max(lo, -lim);
+        cb = std::min(cb, lo / -ub_neg[i]);
       }
     }
     return cb >= cc ? cb : 0.0;
@@ -577,7 +601,7 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     c.gap = best_g;
     const double cb = cap_before(best_c, best_g);
     c.short_regions = cb > 0.0;
-    c.C_out = cb > best_c && cb < std::min(pr.cap, pr.repair_cap) ? cb : kInf;
+    c.C_out = cb > best_c && cb < v_before ? cb : kInf;
     c.r = !c.short_regions ? best_c * rr_
                            : std::max(best_c * rr_in_, std::isfinite(c.C_out) ? c.C_out * rr_ : 0.0);
     c.model_e = err(best_c, best_g);

@@ -230,9 +230,13 @@ class LookaheadPlanner {
     Eigen::Vector3d du;
   };
   std::vector<DuAt> du_at_;
-  // decide(): the directions of the chords before and after the vertex the short regions' window
-  // rule covers (cap_before).
-  std::vector<Eigen::Vector3d> u_before_, u_after_;
+  // decide(): the chords after the vertex the short regions' window rule covers (cap_before), by
+  // distance, with the running per-axis min / max of their directions.
+  struct UaAt {
+    double d;
+    Eigen::Vector3d mn, mx;
+  };
+  std::vector<UaAt> ua_at_;
   std::vector<Piece> pieces_;
   std::vector<Pulse> pulses_;
   std::size_t commit_pulses_ = 0;
