@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Issue 19: the blend tolerance on every corpus program that both interpreters accept.
 # Usage: blend_corpus.sh CONTOUR_SIM CONFIG CORPUS_DIR TOLERANCE_UM PROGRAM...
-# Each program runs through `contour-sim blend --mode limited --method true` (the planner, the
+# (CORPUS_DIR's machine.var, machine.tbl and subroutines/ are used where they exist.)
+# Each program runs through `contour-sim blend --mode limited --method M` (M = $BLEND_CORPUS_METHOD,
+# default true; the planner, the
 # FIR interpolator and the independent path meter: true path error sampled, between samples and
 # at vertices <= the tolerance, no NaN, axis accelerations within the config's limits; contour-sim
 # exits 1 otherwise). A program both interpreters reject (corpus README, gcode_conformance_*)
@@ -12,12 +14,17 @@ sim=$1 cfg=$2 corpus=$3 tol=$4
 shift 4
 # Refused by LinuxCNC's rs274 and contourd on the same line (gcode_conformance_* checks that).
 REJECTED_BY_BOTH=" ${BLEND_CORPUS_REJECTED:-} "
+method=${BLEND_CORPUS_METHOD:-true}
+# The corpus's machine state (parameters, tool table, subroutines), where CORPUS_DIR has one.
+machine=()
+[ -f "$corpus/machine.var" ] && machine+=(--var "$corpus/machine.var")
+[ -f "$corpus/machine.tbl" ] && machine+=(--tbl "$corpus/machine.tbl")
+[ -d "$corpus/subroutines" ] && machine+=(--subroutines "$corpus/subroutines")
 fail=0 ok=0 rej=0 worst=0 worst_prog=""
 for f in "$@"; do
   name=${f#"$corpus"/}
-  out=$("$sim" blend --program "$f" --mode limited --tolerance-um "$tol" --config "$cfg" --method true \
-        --max-corners 0 --var "$corpus/machine.var" --tbl "$corpus/machine.tbl" \
-        --subroutines "$corpus/subroutines" 2>/dev/null)
+  out=$("$sim" blend --program "$f" --mode limited --tolerance-um "$tol" --config "$cfg" --method "$method" \
+        --max-corners 0 "${machine[@]}" 2>/dev/null)
   rc=$?
   if [[ $REJECTED_BY_BOTH == *" $name "* ]]; then
     if [ $rc -eq 2 ] && [[ $out == *'"error"'* ]]; then
@@ -37,5 +44,5 @@ for f in "$@"; do
   fi
 done
 [ -n "${BLEND_CORPUS_SLOW:-}" ] && echo "not run here (label slow, ctest -R blend_corpus_slow): ${BLEND_CORPUS_SLOW}"
-echo "blend corpus: $# programs, $ok within ${tol} um, $rej rejected by both, $fail failed; worst path error ${worst} um ($worst_prog)"
+echo "blend corpus (--method $method): $# programs, $ok within ${tol} um, $rej rejected by both, $fail failed; worst path error ${worst} um ($worst_prog)"
 [ $fail -eq 0 ]
