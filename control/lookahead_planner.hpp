@@ -14,9 +14,10 @@
 // (Tajima & Sencer's FIR segment timing, generalised to per-axis limits and a look-ahead):
 //  - speed changes are staircases: up by at most A per window (the greedy maximum), down as a
 //    fine ramp that follows the braking profile of the look-ahead (at most A per window);
-//  - a corner or curve gets a speed cap C over a region of (L + 1) periods on each side (an
-//    isolated vertex: over +-(L/2 + 2) periods, the window of the output nearest it, with a
-//    window-rule cap over the L + 1 periods before it, see decide()), from
+//  - a corner or curve gets a speed cap C over +-(L/2 + 2) periods, the window of the output
+//    nearest it, with a cap over the L + 1 periods before it that keeps the window rule across
+//    the vertex feasible (decide(); where no such cap exists, C over (L + 1) periods on each
+//    side); out-and-back spikes shorter than 0.4 P are dropped (try_drop_spike); C comes from
 //    the per-axis velocity change across the window (accel) and from the FIR's blend error
 //    (tolerance: sharp-corner displacement 2 alpha_g C sin(theta/2), alpha_g from the filter
 //    taps, plus the moving-average error of curves kappa C^2 sigma^2 / 2); sharp corners may
