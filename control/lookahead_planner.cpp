@@ -36,6 +36,28 @@ double chord_bound(double a0, double a1, double b0, double b1) {
   }
   return m;
 }
+
+// Whether the line b may still change the last chord c instead of starting a new one (try_merge,
+// try_drop_spike): c is not decided, stopped or committed, no committed pulse or verified
+// continuation reaches it, and b runs in the same blend context (within the same tolerance, the
+// same motion kind, spindle, coolant and tool).
+template <class ChordT, class PulseT>
+bool last_chord_open(const ChordT& c, const Block& b, const PlannerParams& p, std::int64_t committed,
+                     const std::vector<PulseT>& fallback, const std::vector<PulseT>& tail) {
+  const BlendMode mode = p.force_mode.value_or(b.blend);
+  if (c.decided || c.stop || c.id <= committed || mode != BlendMode::kLimited ||
+      c.mode != BlendMode::kLimited || c.rapid != b.rapid || c.spindle != b.spindle ||
+      c.rpm != b.spindle_rpm || c.mist != b.mist || c.flood != b.flood || c.tool != b.tool)
+    return false;
+  const double tol = p.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
+                                                                        : p.default_tolerance_mm);
+  if (tol != c.tol || !std::isfinite(c.eps)) return false;
+  for (const auto& q : fallback)
+    if (q.chord >= c.id) return false;
+  for (const auto& q : tail)
+    if (q.chord >= c.id) return false;
+  return true;
+}
 }  // namespace
 
 LookaheadPlanner::LookaheadPlanner(const PlannerParams& p, const Vector3d& start_mm)
@@ -223,21 +245,11 @@ bool LookaheadPlanner::try_drop_spike(const Block& b, const Vector3d& e) {
   if (chords_.size() < 2 || start_from_rest_ || force_stop_next_) return false;
   const Chord& sp = chords_.back();
   const Chord& pr = chords_[chords_.size() - 2];
-  const BlendMode mode = p_.force_mode.value_or(b.blend);
-  if (sp.decided || sp.stop || sp.id <= committed_.chord || !sp.dropped.empty() ||
-      mode != BlendMode::kLimited || sp.mode != BlendMode::kLimited || pr.id + 1 != sp.id ||
-      (pr.b - sp.a).norm() > 1e-9 || sp.rapid != b.rapid || sp.spindle != b.spindle ||
-      sp.rpm != b.spindle_rpm || sp.mist != b.mist || sp.flood != b.flood || sp.tool != b.tool)
+  if (!last_chord_open(sp, b, p_, committed_.chord, fallback_, vcommitted_.tail) ||
+      !sp.dropped.empty() || pr.id + 1 != sp.id || (pr.b - sp.a).norm() > 1e-9)
     return false;
-  const double tol = p_.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
-                                                                          : p_.default_tolerance_mm);
-  if (tol != sp.tol || !std::isfinite(sp.eps)) return false;
   // Back to where the spike started, and short against the tolerance.
-  if ((e - sp.a).norm() > 1e-9 || sp.len > kSpikeShare * tol) return false;
-  for (const auto& q : fallback_)
-    if (q.chord >= sp.id) return false;
-  for (const auto& q : vcommitted_.tail)
-    if (q.chord >= sp.id) return false;
+  if ((e - sp.a).norm() > 1e-9 || sp.len > kSpikeShare * sp.tol) return false;
   spike_mm_ = sp.len;
   path_mm_ = sp.s0;
   --next_id_;
@@ -281,26 +293,16 @@ void LookaheadPlanner::set_limits(Chord& c, int line) {
 bool LookaheadPlanner::try_merge(const Block& b, const Vector3d& e) {
   if (chords_.empty() || start_from_rest_ || force_stop_next_) return false;
   Chord& pr = chords_.back();
-  const BlendMode mode = p_.force_mode.value_or(b.blend);
-  if (pr.decided || pr.stop || pr.id <= committed_.chord || mode != BlendMode::kLimited ||
-      pr.mode != BlendMode::kLimited || pr.rapid != b.rapid || pr.block_feed_mm_min != b.feed_mm_min ||
-      pr.spindle != b.spindle || pr.rpm != b.spindle_rpm || pr.mist != b.mist ||
-      pr.flood != b.flood || pr.tool != b.tool || pr.dropped.size() >= kMergeMax)
+  if (!last_chord_open(pr, b, p_, committed_.chord, fallback_, vcommitted_.tail) ||
+      pr.block_feed_mm_min != b.feed_mm_min || pr.dropped.size() >= kMergeMax)
     return false;
-  const double tol = p_.force_tolerance_mm.value_or(b.tolerance_mm > 0.0 ? b.tolerance_mm
-                                                                          : p_.default_tolerance_mm);
-  if (tol != pr.tol || !std::isfinite(pr.eps)) return false;
-  for (const auto& q : fallback_)
-    if (q.chord >= pr.id) return false;
-  for (const auto& q : vcommitted_.tail)
-    if (q.chord >= pr.id) return false;
   const double short_mm = kMergeShortPeriods * pr.feed_mm_min / 60.0 * T_;
   const double len_new = (e - pr.b).norm();
   if (pr.len > short_mm && len_new > short_mm) return false;
   const Vector3d d = e - pr.a;
   const double len = d.norm();
   if (len < 1e-9) return false;
-  const double dmax = kMergeShare * tol;
+  const double dmax = kMergeShare * pr.tol;
   if (distance_point_segment(pr.b, pr.a, e) > dmax) return false;
   for (const auto& q : pr.dropped)
     if (distance_point_segment(q, pr.a, e) > dmax) return false;
