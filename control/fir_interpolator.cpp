@@ -81,6 +81,7 @@ void Interpolator::configure(const InterpolatorParams& p, const Eigen::Vector3d&
   // Start at 100 %: the plan itself starts from rest, a ramp here would only stretch time.
   ovr_ = std::min(1.0, p.override_max);
   holding_ = resumed_hold_ = done_ = false;
+  whole_phase_ = snap_phase_ = false;
   rapid_now_ = false;
   next_start_ = brake_for_ = -1;
   on_line_ = 0;
@@ -202,6 +203,7 @@ InterpStatus Interpolator::step(double feed_ratio, double rapid_ratio, InterpOut
     }
     // Released: the next line starts (the override ramps up from 0 as after a feed hold).
     sb_stopped_ = sb_go_ = sb_braking_ = false;
+    whole_phase_ = true;
     // The line braked for starts now; a stand that came too late (inside that line) releases
     // nothing: the path runs to the end of the line it stands in and stops again.
     sb_pass_ = next_start_ == sb_for_ ? sb_for_ : -1;
@@ -227,13 +229,28 @@ InterpStatus Interpolator::step(double feed_ratio, double rapid_ratio, InterpOut
     }
     // Leave the hold marker behind.
     holding_ = resumed_hold_ = false;
+    whole_phase_ = true;
     pop_front();
     last_.message_id = -1;
     set_hold_marker(nullptr);
   }
   // Spread override changes over at least t_A (rate limit 1/(L-1) per period).
   const double rate = 1.0 / std::max(1, fir_.length() - 1);
-  ovr_ += std::clamp(target - ovr_, -rate, rate);
+  double dr = std::clamp(target - ovr_, -rate, rate);
+  if (whole_phase_) {
+    // The ramp from a stand (plan time a whole number) up to 100 % advances plan time by
+    // sum k rate, k = 1..n (n = L - 1): (n + 1) / 2, half a period off for an even n, and every
+    // later sample would then lie halfway between two of the samples the planner verified (whose
+    // polyline cuts the vertices differently: 50.0002 um at P = 50 um on a pcb2gcode program
+    // after its M0). Starting with half a step makes it sum (k - 1/2) rate = n / 2 plus the last
+    // half step: a whole number, so at 100 % the output samples are the verified ones again
+    // (snapped to it when the ramp ends: rate = 1 / n is not exact in binary for every n).
+    whole_phase_ = false;
+    snap_phase_ = dr > 0.0;
+    if (dr > 0.0 && (fir_.length() - 1) % 2 == 0) dr = std::min(dr, 0.5 * rate);
+  }
+  if (snap_phase_ && !(dr > 0.0)) snap_phase_ = false;  // the ramp ended below 100 %: no snap
+  ovr_ += dr;
   if (sb_braking_) {
     // The ramp to the single-block stand ends up to a cycle short of it: creep the rest at the
     // smallest ramp step, so that the stand is exactly where the next line would start (with
@@ -262,7 +279,12 @@ InterpStatus Interpolator::step(double feed_ratio, double rapid_ratio, InterpOut
     limit = std::max(limit, std::ceil(static_cast<double>(s.start_cycle + tail) +
                                       s.start_offset_cycles + segment_duration(s)));
   }
-  const double next = std::min(tau_ + ovr_, std::max(limit, tau_));
+  double next = std::min(tau_ + ovr_, std::max(limit, tau_));
+  if (snap_phase_ && ovr_ >= 1.0) {
+    snap_phase_ = false;
+    const double whole = std::nearbyint(next);
+    if (std::abs(next - whole) < 1e-6) next = whole;
+  }
   tau_ = next;
   InterpStatus st = InterpStatus::kRunning;
   if (count_ == 0) st = base_progress_mm_ > 0.0 ? InterpStatus::kStarved : InterpStatus::kIdle;

@@ -209,6 +209,8 @@ class Interpolator {
   InterpStatus hold_status_ = InterpStatus::kHolding;  // kHolding or kSpindleWait
   void set_hold_marker(const PlannedSegment* m) noexcept;
   bool resumed_hold_ = false;
+  bool whole_phase_ = false;  // the next ramp up starts from a stand (see step())
+  bool snap_phase_ = false;   // that ramp is under way: snap plan time when it reaches 100 %
   bool done_ = false;
   bool rapid_now_ = false;  // the segment the path is on is a rapid
   // The next motion segment to start, when of the other kind (-1: none): a lower override for it

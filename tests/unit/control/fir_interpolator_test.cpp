@@ -173,6 +173,70 @@ TEST(Interpolator, HoldsAtProgramStopUntilResumed) {
   EXPECT_EQ(out.position_mm, Vector3d(5, 5, 0));
 }
 
+// After a hold the time scale ramps up from 0 at the override rate limit. The ramp must bring
+// plan time back to a whole number: at 100 % the output samples are then the plan samples the
+// planner verified, not points halfway between them (whose polyline cuts a vertex differently:
+// the meter found 50.0002 um at P = 50 um after a pcb2gcode program's M0). Both parities of the
+// filter length (the plain ramp sums to a half period when L - 1 is even).
+TEST(Interpolator, RampAfterAHoldEndsOnAWholePlanPeriod) {
+  for (const auto& taps : {std::pair{101, 0}, std::pair{17, 0}, std::pair{16, 0}, std::pair{9, 6}}) {
+    PlannerParams pp;
+    pp.fir_taps = taps.first;
+    pp.fir2_taps = taps.second;
+    BlendPlanner pl(pp, Vector3d::Zero());
+    Block a;
+    a.line = 1;
+    a.feed_mm_min = 1200;
+    a.seg = PathSegment::line(Vector3d::Zero(), Vector3d(5, 0, 0));
+    pl.push(a);
+    Block h;
+    h.kind = BlockKind::kProgramStop;
+    h.line = 2;
+    pl.push(h);
+    Block b = a;
+    b.line = 3;
+    b.seg = PathSegment::line(Vector3d(5, 0, 0), Vector3d(5, 5, 0));
+    pl.push(b);
+    Block e;
+    e.kind = BlockKind::kEnd;
+    pl.push(e);
+    InterpolatorParams ipp;
+    ipp.fir_taps = taps.first;
+    ipp.fir2_taps = taps.second;
+    Interpolator ip;
+    ip.configure(ipp, Vector3d::Zero());
+    PlannedSegment s;
+    while (pl.pop(s)) ASSERT_TRUE(ip.push(s));
+    const int L = taps.first + (taps.second > 0 ? taps.second - 1 : 0);
+    InterpOutput out;
+    int n = 0;
+    while (ip.step(1.0, out) != InterpStatus::kHolding) ASSERT_LT(++n, 100000);
+    double tau = out.plan_time_cycles;
+    EXPECT_EQ(tau, std::floor(tau));
+    ip.resume();
+    double rate_prev = 0.0;
+    bool at_full = false;
+    int whole = 0;
+    while (ip.step(1.0, out) != InterpStatus::kDone) {
+      ASSERT_LT(++n, 100000);
+      const double adv = out.plan_time_cycles - tau;
+      tau = out.plan_time_cycles;
+      // A ramp within the rate limit, up to 100 %.
+      EXPECT_LE(adv - rate_prev, 1.0 / (L - 1) + 1e-12) << "L " << L;
+      EXPECT_LE(adv, 1.0 + 1e-12);
+      rate_prev = adv;
+      if (adv == 1.0) at_full = true;
+      if (at_full) {
+        EXPECT_EQ(tau, std::floor(tau)) << "L " << L << " plan time " << tau;
+        ++whole;
+      }
+    }
+    EXPECT_TRUE(at_full) << "L " << L;
+    EXPECT_GT(whole, 100) << "L " << L;
+    EXPECT_EQ(out.position_mm, Vector3d(5, 5, 0));
+  }
+}
+
 TEST(Interpolator, FeedMoveAfterASpindleChangeWaitsAtAnExactStopWithTheNewSpeedOut) {
   // G0 X5 with the spindle starting (M3 S6000), G1 X10 (waits), G1 X15 S6000 (no wait),
   // G1 X20 S8000 (speed change: waits), M5 G1 X25 (spindle off: no wait).
