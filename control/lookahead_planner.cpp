@@ -359,6 +359,7 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   c.gap = 0;
   c.r = 0.0;
   c.C_out = kInf;
+  c.C_after = kInf;
   c.short_regions = false;
   c.model_e = 0.0;
   if (c.stop) {
@@ -421,12 +422,15 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   for (std::size_t k = 1; k < du_at_.size(); ++k) {
     du_at_[k].du = du_at_[k].du.cwiseMax(du_at_[k - 1].du);
   }
-  auto acc_cap = [&](double v) {
+  auto du_within = [&](double v) {
     const double s = v * L1_;
     // The neighbours with d <= s (d == 0, the chords at the vertex, always).
     const auto it = std::upper_bound(du_at_.begin(), du_at_.end(), std::max(s, 0.0),
                                      [](double x, const DuAt& a) { return x < a.d; });
-    const Vector3d du = it == du_at_.begin() ? Vector3d::Zero() : Vector3d(std::prev(it)->du);
+    return it == du_at_.begin() ? Vector3d::Zero() : Vector3d(std::prev(it)->du);
+  };
+  auto acc_cap = [&](double v) {
+    const Vector3d du = du_within(v);
     double cap = kInf;
     for (int i = 0; i < 3; ++i)
       if (du[i] > 1e-12) cap = std::min(cap, A_[i] / du[i]);
@@ -454,6 +458,7 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     cacc = v;
   }
   c.C_acc = cacc;
+  c.du_acc = std::isfinite(cacc) ? du_within(cacc) : Vector3d::Zero();
   const double vhi = std::min(v0, acc_margin_ * (std::isfinite(cacc) ? cacc : kInf));
   // Tolerance model: e(v, g) = v (ks(g) + turn_others(v) sigma^2 / (2 rr)).
   const BlendMode mode = pr.mode;
@@ -497,20 +502,24 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   constexpr std::size_t kMaxChords = 48;
   const double v_before = std::min(pr.cap, pr.repair_cap);
   const double v_after = std::min(c.cap, c.repair_cap);
-  Vector3d ub_pos = Vector3d::Zero(), ub_neg = Vector3d::Zero();
-  bool before_ok = true;
-  {
-    std::size_t n = 0;
-    for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
-      const Chord& q = chord(k);
-      if (k < id - 1 && p - (q.s0 + q.len) > v_before * rr_) break;
-      if (++n > kMaxChords) {
-        before_ok = false;
-        break;
-      }
-      ub_pos = ub_pos.cwiseMax(q.u);
-      ub_neg = ub_neg.cwiseMax(-q.u);
+  // The chords before the vertex by distance (of their end from it), as running per-axis min /
+  // max of their directions, within v_before rr.
+  ub_at_.clear();
+  double ub_overflow_d = kInf;  // the distance of the first chord before the vertex past kMaxChords
+  for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
+    const Chord& q = chord(k);
+    const double d = k == id - 1 ? 0.0 : p - (q.s0 + q.len);
+    if (k < id - 1 && d > v_before * rr_) break;
+    if (ub_at_.size() == kMaxChords) {
+      ub_overflow_d = d;
+      break;
     }
+    UaAt e{d, q.u, q.u};
+    if (!ub_at_.empty()) {
+      e.mn = e.mn.cwiseMin(ub_at_.back().mn);
+      e.mx = e.mx.cwiseMax(ub_at_.back().mx);
+    }
+    ub_at_.push_back(e);
   }
   ua_at_.clear();
   double ua_overflow_d = kInf;  // the distance of the first chord after the vertex past kMaxChords
@@ -529,32 +538,63 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     }
     ua_at_.push_back(e);
   }
+  // The largest cap cb >= cc over the rr periods before the vertex that keeps the window rule
+  // across it with the chords within cb rr before it (a lower cb reaches fewer chords, so the
+  // chords far back on a curve, whose directions differ most, do not count against it), or 0.
+  // The after side: cc ua_i for the chords the L1 periods after the vertex reach. For g = 0 the
+  // pairs only bound cb from above here: a speed before the vertex far below cc (a lower bound
+  // where |cc ua_i| > A_i) is left to the forward pass, which holds the window rule exactly and
+  // repairs a cap where it cannot; across a rest (g > 0) the command is zero, so |cc ua_i| <= A_i.
   auto cap_before = [&](double cc, int g) {
-    if (!before_ok) return 0.0;
+    if (ub_at_.empty()) return 0.0;
     const double reach_a = cc * rr_in_ + v_after * (rr_ - rr_in_);
     if (reach_a >= ua_overflow_d) return 0.0;
     std::size_t m = 0;  // the chords after the vertex the L1 periods after it reach: [0, m]
     while (m + 1 < ua_at_.size() && ua_at_[m + 1].d <= reach_a) ++m;
     const Vector3d& mn = ua_at_[m].mn;
     const Vector3d& mx = ua_at_[m].mx;
-    double cb = v_before;
+    Vector3d lim;
     for (int i = 0; i < 3; ++i) {
-      if (!std::isfinite(A_[i])) continue;
-      const double lim = A_[i] * (1.0 - 1e-6);
-      if (std::abs(cc * mn[i]) > lim || std::abs(cc * mx[i]) > lim) return 0.0;
-      // [lo, hi] = [b - lim, b + lim] for v ub_i (and within [-lim, lim] across a rest).
-      if (ub_pos[i] > 1e-15) {
-        double hi = cc * mn[i] + lim;
-        if (g > 0) hi = std::min(hi, lim);
-        cb = std::min(cb, hi / ub_pos[i]);
-      }
-      if (ub_neg[i] > 1e-15) {
-        double lo = cc * mx[i] - lim;
-        if (g > 0) lo = std::max(lo, -lim);
-        cb = std::min(cb, lo / -ub_neg[i]);
-      }
+      lim[i] = A_[i] * (1.0 - 1e-6);
+      if (std::isfinite(A_[i]) && g > 0 && (std::abs(cc * mn[i]) > lim[i] || std::abs(cc * mx[i]) > lim[i]))
+        return 0.0;
     }
-    return cb >= cc ? cb : 0.0;
+    // The bound with the chords before within [0, j].
+    auto bound = [&](std::size_t j) {
+      const Vector3d ub_pos = ub_at_[j].mx.cwiseMax(0.0), ub_neg = (-ub_at_[j].mn).cwiseMax(0.0);
+      double cb = v_before;
+      for (int i = 0; i < 3; ++i) {
+        if (!std::isfinite(A_[i])) continue;
+        // [lo, hi] = [b - lim, b + lim] for v ub_i (and within [-lim, lim] across a rest).
+        if (ub_pos[i] > 1e-15) {
+          double hi = cc * mn[i] + lim[i];
+          if (g > 0) hi = std::min(hi, lim[i]);
+          cb = std::min(cb, hi / ub_pos[i]);
+        }
+        if (ub_neg[i] > 1e-15) {
+          double lo = cc * mx[i] - lim[i];
+          if (g > 0) lo = std::max(lo, -lim[i]);
+          cb = std::min(cb, lo / -ub_neg[i]);
+        }
+      }
+      return cb;
+    };
+    // cb rr reaches the chords [0, j] for cb in [d_j / rr, d_{j+1} / rr); the bound does not
+    // increase with j, so the first range without a feasible cb ends the search.
+    double best = 0.0;
+    for (std::size_t j = 0; j < ub_at_.size(); ++j) {
+      const double x_lo = std::max(cc, ub_at_[j].d / rr_);
+      double x_hi = (j + 1 < ub_at_.size() ? ub_at_[j + 1].d : ub_overflow_d) / rr_;
+      x_hi = std::min(x_hi * (1.0 - 1e-9), v_before);
+      if (x_lo > x_hi) {
+        if (x_lo > v_before) break;
+        continue;
+      }
+      const double x = std::min(bound(j), x_hi);
+      if (x < x_lo) break;
+      best = std::max(best, x);
+    }
+    return best >= cc ? best : 0.0;
   };
   auto cost = [&](double cc, int g) {
     double pen = 2.0 * rr_ * (1.0 - cc / v0);
@@ -613,6 +653,12 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     c.r = !c.short_regions ? best_c * rr_
                            : std::max(best_c * rr_in_, std::isfinite(c.C_out) ? c.C_out * rr_ : 0.0);
     c.model_e = err(best_c, best_g);
+    // After the vertex the forward pass holds the window rule against the real history, so a
+    // cap there only serves the tolerance: where C is the acceleration cap's, the speed the
+    // tolerance model allows holds over the output window after the vertex instead (the curve's
+    // last vertex no longer holds its cap L + 1 periods into the straight after it).
+    c.C_after = best_g == 0 ? std::max(best_c, speed_for(v0, 0)) : best_c;
+    if (c.C_after > best_c) c.r = std::max(c.r, c.C_after * rr_in_);
   }
   c.decided = true;
 }
@@ -624,6 +670,7 @@ void LookaheadPlanner::build_pieces(double s_from, double s_stop, bool final) {
     double pos;
     bool start;
     double cap, cacc;
+    std::int64_t id;
   };
   thread_local std::vector<Ev> ev;
   ev.clear();
@@ -631,25 +678,35 @@ void LookaheadPlanner::build_pieces(double s_from, double s_stop, bool final) {
     if (!c.decided || c.stop || !std::isfinite(c.C)) continue;
     if (c.s0 + c.r <= s_from || c.s0 - c.r >= s_stop) continue;
     const double ri = c.C * (c.short_regions ? rr_in_ : rr_);
-    ev.push_back({c.s0 - ri, true, c.C, c.C_acc});
-    ev.push_back({c.s0 + ri, false, c.C, c.C_acc});
+    ev.push_back({c.s0 - ri, true, c.C, c.C_acc, c.id});
+    if (c.C_after > c.C) {
+      // C before the vertex, C_after over the output window after it (see decide()).
+      ev.push_back({c.s0, false, c.C, c.C_acc, c.id});
+      if (std::isfinite(c.C_after)) {
+        ev.push_back({c.s0, true, c.C_after, c.C_acc, c.id});
+        ev.push_back({c.s0 + c.C_after * rr_in_, false, c.C_after, c.C_acc, c.id});
+      }
+    } else {
+      ev.push_back({c.s0 + ri, false, c.C, c.C_acc, c.id});
+    }
     if (c.short_regions && std::isfinite(c.C_out)) {
       // The window rule's cap, not a curve's: it takes nothing from the braking there.
-      ev.push_back({c.s0 - c.C_out * rr_, true, c.C_out, kInf});
-      ev.push_back({c.s0, false, c.C_out, kInf});
+      ev.push_back({c.s0 - c.C_out * rr_, true, c.C_out, kInf, c.id});
+      ev.push_back({c.s0, false, c.C_out, kInf, c.id});
     }
   }
   std::sort(ev.begin(), ev.end(), [](const Ev& x, const Ev& y) { return x.pos < y.pos; });
-  std::multiset<double> caps, caccs;
+  std::multiset<double> caps;
+  std::multiset<std::pair<double, std::int64_t>> caccs;
   std::size_t ei = 0;
   auto apply_to = [&](double x) {
     while (ei < ev.size() && ev[ei].pos <= x + kTiny) {
       if (ev[ei].start) {
         caps.insert(ev[ei].cap);
-        caccs.insert(ev[ei].cacc);
+        caccs.insert({ev[ei].cacc, ev[ei].id});
       } else {
         caps.erase(caps.find(ev[ei].cap));
-        caccs.erase(caccs.find(ev[ei].cacc));
+        caccs.erase(caccs.find({ev[ei].cacc, ev[ei].id}));
       }
       ++ei;
     }
@@ -672,7 +729,10 @@ void LookaheadPlanner::build_pieces(double s_from, double s_stop, bool final) {
       pc.chord = k;
       pc.cap = std::min(c.cap, c.repair_cap);
       if (!caps.empty()) pc.cap = std::min(pc.cap, *caps.begin());
-      if (!caccs.empty()) pc.cacc = *caccs.begin();
+      if (!caccs.empty()) {
+        pc.cacc = caccs.begin()->first;
+        pc.cacc_chord = caccs.begin()->second;
+      }
       pieces_.push_back(pc);
       x0 = nx;
     }
@@ -705,7 +765,22 @@ void LookaheadPlanner::backward_pass(bool final) {
     double vhi2 = pc.cap * pc.cap;
     if (std::isfinite(a_line)) vhi2 = std::min(vhi2, qe + 2.0 * a_line * len);
     double dv = c.dv;
-    if (std::isfinite(pc.cacc)) dv *= std::max(0.0, 1.0 - std::sqrt(vhi2) / pc.cacc);
+    if (std::isfinite(pc.cacc)) {
+      // The tangential budget left by the curve, per axis: over a window the curve turns the
+      // velocity of axis i by about v du_i (v / C_acc) (du_i: the direction change C_acc sees;
+      // the window's span shrinks with v), and the speed may change by the rest of A_i along
+      // u_i. An axis the curve loads but the path does not run along does not limit the
+      // braking (the isotropic 1 - v / C_acc did: pcb2gcode's pads braked at 1/5 of the limit).
+      const Vector3d& du = chord(pc.cacc_chord).du_acc;
+      const double use = vhi2 / pc.cacc;
+      double b = kInf;
+      for (int i = 0; i < 3; ++i) {
+        if (!std::isfinite(A_[i])) continue;
+        const double ui = std::abs(c.u[i]);
+        if (ui > 1e-12) b = std::min(b, std::max(0.0, A_[i] - use * du[i]) / ui);
+      }
+      dv = std::min(dv, b);
+    }
     pc.aq = aq_of(dv);
     double qs = pc.cap * pc.cap;
     if (std::isfinite(pc.aq)) qs = std::min(qs, qe + 2.0 * pc.aq * len);

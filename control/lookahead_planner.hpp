@@ -96,10 +96,12 @@ class LookaheadPlanner {
     double repair_cap = kInf;  // mm/period, lowered after an infeasible window
     double C = kInf;         // speed cap around the vertex, mm/period
     double C_acc = kInf;     // the pure per-axis acceleration cap (no margin), mm/period
+    Eigen::Vector3d du_acc = Eigen::Vector3d::Zero();  // per-axis direction change C_acc sees
     int gap = 0;             // rest at the vertex, periods
     double r = 0.0;          // reach of its regions, mm
     bool short_regions = false;  // C over +-C rr_in only, C_out over the rr periods before it
     double C_out = kInf;     // window-rule cap over C_out rr before the vertex, mm/period
+    double C_after = kInf;   // short regions: the cap after the vertex (>= C), mm/period
     double model_e = 0.0;    // modelled error at the decision, mm
     bool reported = false;
     // Collinear merging (try_merge): programmed vertices inside this chord, the block feed and
@@ -113,6 +115,7 @@ class LookaheadPlanner {
     std::int64_t chord = 0;  // chord id
     double cap = 0.0;        // mm/period
     double cacc = kInf;      // pure acceleration cap of the regions covering it
+    std::int64_t cacc_chord = -1;  // the vertex (chord id) whose C_acc that is
     double qe = 0.0, aq = 0.0;  // braking profile: Q(s) = min(cap^2, qe + 2 aq (s1 - s))
   };
   struct Pulse {
@@ -238,6 +241,8 @@ class LookaheadPlanner {
     Eigen::Vector3d mn, mx;
   };
   std::vector<UaAt> ua_at_;
+  // decide(): the chords before the vertex (cap_before), by the distance of their end from it.
+  std::vector<UaAt> ub_at_;
   std::vector<Piece> pieces_;
   std::vector<Pulse> pulses_;
   std::size_t commit_pulses_ = 0;
