@@ -102,6 +102,7 @@ class LookaheadPlanner {
     bool short_regions = false;  // C over +-C rr_in only, C_out over the rr periods before it
     double C_out = kInf;     // window-rule cap over C_out rr before the vertex, mm/period
     double C_after = kInf;   // short regions: the cap after the vertex (>= C), mm/period
+    double stop_in = 0.0;    // a stop: the speed it is entered with (stop_entry), mm/period
     double model_e = 0.0;    // modelled error at the decision, mm
     bool reported = false;
     // Collinear merging (try_merge): programmed vertices inside this chord, the block feed and
@@ -163,6 +164,7 @@ class LookaheadPlanner {
   // shorter than kSpikeShare P; the next chord's tolerance shrinks by its length (spike_mm_).
   bool try_drop_spike(const Block& b, const Eigen::Vector3d& e);
   void set_limits(Chord& c, int line);
+  [[nodiscard]] double stop_entry(std::int64_t id) const;
   void barrier(SegmentKind kind, const std::string& msg, const Block& b, double extra_s);
   void maybe_plan();
   // Plans from the committed state to the look-ahead end (a stop), verifies, commits a prefix.
