@@ -488,7 +488,7 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   c.C_acc = cacc;
   c.du_acc = std::isfinite(cacc) ? du_within(cacc) : Vector3d::Zero();
   const double vhi = std::min(v0, acc_margin_ * (std::isfinite(cacc) ? cacc : kInf));
-  // Tolerance model: e(v, g) = v |ks(g) n_own + sum_others(v) n_j sigma^2 / (2 rr)| (below).
+  // Tolerance model: e(v, g) = v (ks(g) + |sum_others(v) n_j| sigma^2 / (2 rr)).
   const BlendMode mode = pr.mode;
   double eps = std::min(pr.eps, c.eps) * c.f;
   if (mode == BlendMode::kFull) eps = kInf;
@@ -496,25 +496,20 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   auto ks = [&](int g) {
     return 2.0 * alpha_[static_cast<std::size_t>(g)] * st + st / (4.0 * std::max(1, L_ - g));
   };
-  // The curve term as a vector: each neighbour within the output window displaces the output
-  // towards the inside of its turn, the vertex itself along the change of direction; turns the
-  // other way cancel (a 24-degree corner against the arc leading into it: the scalar sum of the
-  // turns held it at 53 mm/s where the verification measured 3 um of its 49.5; pcb2gcode
-  // multivibrator-back 57.5 -> 55.7 s, -milldrill 29.1 -> 26.7 s; 3D_Chips 1.4 % slower from the
-  // tolerance repairs where it underestimates). Not monotone in v in every case: speed_for's
-  // bisection then finds one speed within eps, and the verification holds the tolerance.
-  const Vector3d du_own = u_next - u_prev;
-  const Vector3d n_own = du_own.norm() > 1e-15 ? Vector3d(du_own.normalized()) : Vector3d::Zero();
+  // The curve term sums the neighbours within the output window as vectors (each displaces the
+  // output towards the inside of its turn, so turns the other way cancel: a chord zigzag, an S),
+  // not their angles: pcb2gcode multivibrator-milldrill 29.1 -> 26.9 s, 3D_Chips 63.9 -> 62.8 s.
+  // (Summing the vertex's own turn into the same vector was faster still on multivibrator-back,
+  // 57.5 -> 55.7 s, but underestimated often enough to triple the tolerance repairs there, and
+  // planning fell to 675x real time.)
   auto others = [&](double vv) {
     const double s = 0.5 * vv * rr_;
     Vector3d t = Vector3d::Zero();
     for (const auto& n : nb)
       if (n.d <= s) t += n.n;
-    return t;
+    return t.norm();
   };
-  auto err = [&](double vv, int g) {
-    return vv * (ks(g) * n_own + others(vv) * (sigma2_ / (2.0 * rr_))).norm();
-  };
+  auto err = [&](double vv, int g) { return vv * (ks(g) + others(vv) * sigma2_ / (2.0 * rr_)); };
   // Largest speed <= vtop with err <= eps (err is increasing in v).
   auto speed_for = [&](double vtop, int g) {
     if (!std::isfinite(eps) || err(vtop, g) <= eps) return vtop;
