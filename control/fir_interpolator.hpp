@@ -22,6 +22,8 @@
 // so its change is spread over at least t_A. It starts at 100 %; while it is not 100 % the output
 // points lie on the verified plan chords but the straight line between two output points may cut a
 // plan sample vertex by the sagitta of two consecutive plan chords (sub-um at 1 ms).
+// After a hold (and a single-block stand) the time scale ramps up from 0 so that plan time
+// reaches a whole period again: at 100 % the output samples are then the plan samples themselves.
 #include <Eigen/Core>
 #include <cstdint>
 #include <string>
