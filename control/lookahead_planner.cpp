@@ -405,27 +405,24 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   const Vector3d u_prev = pr.u, u_next = c.u;
   std::vector<Nb>& nb = nb_;
   nb.clear();
+  // The turn at the vertex between two chords as a vector: its angle along the change of direction.
+  auto turn_vec = [](const Chord& before, const Chord& after) {
+    const Vector3d du = after.u - before.u;
+    return du.norm() > 1e-15 ? Vector3d(after.turn * du.normalized()) : Vector3d::Zero();
+  };
   du_at_.clear();
   for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
     const Chord& q = chord(k);
     const double d = p - (q.s0 + q.len);  // distance from the vertex to q's end
     if (k < id - 1 && d > span_max) break;
-    {
-      const double tn = k < id - 1 ? chord(k + 1).turn : 0.0;
-      const Vector3d du = k < id - 1 ? Vector3d(chord(k + 1).u - q.u) : Vector3d::Zero();
-      nb.push_back({std::max(0.0, d), tn, du.norm() > 1e-15 ? Vector3d(tn * du.normalized()) : Vector3d::Zero()});
-    }
+    nb.push_back({std::max(0.0, d), k < id - 1 ? turn_vec(q, chord(k + 1)) : Vector3d::Zero()});
     du_at_.push_back({std::max(0.0, d), (u_next - q.u).cwiseAbs()});
   }
   for (std::int64_t k = id; k < next_id_; ++k) {
     const Chord& q = chord(k);
     const double d = q.s0 - p;
     if (k > id && d > span_max) break;
-    {
-      const double tn = k > id ? q.turn : 0.0;
-      const Vector3d du = k > id ? Vector3d(q.u - chord(k - 1).u) : Vector3d::Zero();
-      nb.push_back({d, tn, du.norm() > 1e-15 ? Vector3d(tn * du.normalized()) : Vector3d::Zero()});
-    }
+    nb.push_back({d, k > id ? turn_vec(chord(k - 1), q) : Vector3d::Zero()});
     du_at_.push_back({d, (q.u - u_prev).cwiseAbs()});
   }
   (void)final;
@@ -708,7 +705,7 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
     // tolerance model allows holds over the output window after the vertex instead (the curve's
     // last vertex no longer holds its cap L + 1 periods into the straight after it).
     c.C_after = best_g == 0 ? std::max(best_c, speed_for(v0, 0)) : best_c;
-    if (c.C_after > best_c) c.r = std::max(c.r, c.C_after * rr_in_);
+    if (std::isfinite(c.C_after) && c.C_after > best_c) c.r = std::max(c.r, c.C_after * rr_in_);
   }
   c.decided = true;
 }

@@ -226,8 +226,7 @@ class LookaheadPlanner {
   // Work buffers of one plan.
   struct Nb {
     double d;     // distance from the vertex being decided, mm
-    double turn;  // turning angle of the vertex there, rad
-    Eigen::Vector3d n = Eigen::Vector3d::Zero();  // turn times the unit change of direction
+    Eigen::Vector3d n;  // its turning angle (rad) along its unit change of direction
   };
   std::vector<Nb> nb_;
   // decide(): the per-axis direction change of each neighbour (against the chord on the other
