@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "control/blend_planner.hpp"
@@ -57,6 +58,24 @@ std::vector<PlannedSegment> plan_blocks(const std::vector<Block>& blocks) {
   PlannedSegment s;
   while (pl.pop(s)) out.push_back(s);
   return out;
+}
+
+// Pushes a 5 mm move along X, a hold of `kind` (line 2) and a 5 mm move along Y at F1200.
+void push_move_hold_move(BlendPlanner& pl, BlockKind kind, const std::string& message = "") {
+  Block a;
+  a.line = 1;
+  a.feed_mm_min = 1200;
+  a.seg = PathSegment::line(Vector3d::Zero(), Vector3d(5, 0, 0));
+  pl.push(a);
+  Block h;
+  h.kind = kind;
+  h.line = 2;
+  h.message = message;
+  pl.push(h);
+  Block b = a;
+  b.line = 3;
+  b.seg = PathSegment::line(Vector3d(5, 0, 0), Vector3d(5, 5, 0));
+  pl.push(b);
 }
 
 std::vector<PlannedSegment> plan_square(BlendMode mode) {
@@ -145,20 +164,7 @@ TEST(Interpolator, OverrideScalesTimeNotPath) {
 TEST(Interpolator, HoldsAtProgramStopUntilResumed) {
   PlannerParams pp;
   BlendPlanner pl(pp, Vector3d::Zero());
-  Block a;
-  a.line = 1;
-  a.feed_mm_min = 1200;
-  a.seg = PathSegment::line(Vector3d::Zero(), Vector3d(5, 0, 0));
-  pl.push(a);
-  Block h;
-  h.kind = BlockKind::kToolChange;
-  h.line = 2;
-  h.message = "tool 3";
-  pl.push(h);
-  Block b = a;
-  b.line = 3;
-  b.seg = PathSegment::line(Vector3d(5, 0, 0), Vector3d(5, 5, 0));
-  pl.push(b);
+  push_move_hold_move(pl, BlockKind::kToolChange, "tool 3");
   Interpolator ip;
   end_and_load(pl, ip);
   InterpOutput out;
@@ -184,19 +190,7 @@ TEST(Interpolator, RampAfterAHoldEndsOnAWholePlanPeriod) {
     pp.fir_taps = taps.first;
     pp.fir2_taps = taps.second;
     BlendPlanner pl(pp, Vector3d::Zero());
-    Block a;
-    a.line = 1;
-    a.feed_mm_min = 1200;
-    a.seg = PathSegment::line(Vector3d::Zero(), Vector3d(5, 0, 0));
-    pl.push(a);
-    Block h;
-    h.kind = BlockKind::kProgramStop;
-    h.line = 2;
-    pl.push(h);
-    Block b = a;
-    b.line = 3;
-    b.seg = PathSegment::line(Vector3d(5, 0, 0), Vector3d(5, 5, 0));
-    pl.push(b);
+    push_move_hold_move(pl, BlockKind::kProgramStop);
     Block e;
     e.kind = BlockKind::kEnd;
     pl.push(e);
