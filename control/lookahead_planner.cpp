@@ -533,41 +533,38 @@ void LookaheadPlanner::decide(std::int64_t id, bool final) {
   constexpr std::size_t kMaxChords = 48;
   const double v_before = std::min(pr.cap, pr.repair_cap);
   const double v_after = std::min(c.cap, c.repair_cap);
-  // The chords before the vertex by distance (of their end from it), as running per-axis min /
-  // max of their directions, within v_before rr.
+  // The chords before the vertex (by the distance of their end from it, within v_before rr) and
+  // after it (by the distance of their start, within v_after rr), each as running per-axis min /
+  // max of their directions, at most kMaxChords; *_overflow_d: the distance of the first chord
+  // left out.
+  auto add_running = [&](std::vector<UaAt>& list, double d, const Vector3d& u, double& overflow_d) {
+    if (list.size() == kMaxChords) {
+      overflow_d = d;
+      return false;
+    }
+    UaAt e{d, u, u};
+    if (!list.empty()) {
+      e.mn = e.mn.cwiseMin(list.back().mn);
+      e.mx = e.mx.cwiseMax(list.back().mx);
+    }
+    list.push_back(e);
+    return true;
+  };
   ub_at_.clear();
-  double ub_overflow_d = kInf;  // the distance of the first chord before the vertex past kMaxChords
+  double ub_overflow_d = kInf;
   for (std::int64_t k = id - 1; k >= chords_.front().id; --k) {
     const Chord& q = chord(k);
     const double d = k == id - 1 ? 0.0 : p - (q.s0 + q.len);
     if (k < id - 1 && d > v_before * rr_) break;
-    if (ub_at_.size() == kMaxChords) {
-      ub_overflow_d = d;
-      break;
-    }
-    UaAt e{d, q.u, q.u};
-    if (!ub_at_.empty()) {
-      e.mn = e.mn.cwiseMin(ub_at_.back().mn);
-      e.mx = e.mx.cwiseMax(ub_at_.back().mx);
-    }
-    ub_at_.push_back(e);
+    if (!add_running(ub_at_, d, q.u, ub_overflow_d)) break;
   }
   ua_at_.clear();
-  double ua_overflow_d = kInf;  // the distance of the first chord after the vertex past kMaxChords
+  double ua_overflow_d = kInf;
   for (std::int64_t k = id; k < next_id_; ++k) {
     const Chord& q = chord(k);
     const double d = k == id ? 0.0 : q.s0 - p;
     if (k > id && d > v_after * rr_) break;
-    if (ua_at_.size() == kMaxChords) {
-      ua_overflow_d = d;
-      break;
-    }
-    UaAt e{d, q.u, q.u};
-    if (!ua_at_.empty()) {
-      e.mn = e.mn.cwiseMin(ua_at_.back().mn);
-      e.mx = e.mx.cwiseMax(ua_at_.back().mx);
-    }
-    ua_at_.push_back(e);
+    if (!add_running(ua_at_, d, q.u, ua_overflow_d)) break;
   }
   // The largest cap cb >= cc over the rr periods before the vertex that keeps the window rule
   // across it with the chords within cb rr before it (a lower cb reaches fewer chords, so the
